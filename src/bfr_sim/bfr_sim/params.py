@@ -1,0 +1,415 @@
+"""Physical parameters of the Butterfly robot rig.
+
+One frozen dataclass per parameter set, SI units in every field, validated on creation.
+They are loaded from ``config/rig.yaml`` (ROS 2 parameter-file format), which is also the
+simulator node's parameter file, so the physics has exactly one source.
+
+Nominal values are those of Knol (2016), Table 6.1 ("the seed"); the effective rolling radius
+is derived, ``R = sqrt(R_b^2 - d_f^2 / 4)`` (the seed prints ``sqrt(R_b - d_f^2/4)``, a typo;
+its quoted 1.08e-2 m does not follow from its own R_b and d_f, which give 1.063e-2 m).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+__all__ = [
+    "ParameterError",
+    "BallParams",
+    "ContourParams",
+    "FrameParams",
+    "EnvironmentParams",
+    "JointParams",
+    "ActuatorParams",
+    "TrackParams",
+    "RigParams",
+    "default_params_path",
+    "load_params",
+    "params_from_dict",
+    "params_to_ros_yaml",
+]
+
+
+class ParameterError(ValueError):
+    """A parameter file or value is invalid; the message names the offending entry."""
+
+
+def _check(cond: bool, name: str, msg: str) -> None:
+    if not cond:
+        raise ParameterError(f"parameter {name}: {msg}")
+
+
+def _finite(name: str, value: float) -> None:
+    _check(isinstance(value, (int, float)) and math.isfinite(value), name,
+           f"must be a finite number, got {value!r}")
+
+
+def _positive(name: str, value: float) -> None:
+    _finite(name, value)
+    _check(value > 0.0, name, f"must be > 0, got {value!r}")
+
+
+def _nonnegative(name: str, value: float) -> None:
+    _finite(name, value)
+    _check(value >= 0.0, name, f"must be >= 0, got {value!r}")
+
+
+@dataclass(frozen=True)
+class BallParams:
+    """The hollow ball.
+
+    Attributes
+    ----------
+    mass : float
+        m_b [kg].
+    inertia : float
+        J_b [kg m^2], about the ball's centre.
+    radius : float
+        R_b [m], the ball's own radius.
+    plate_distance : float
+        d_f [m], the distance between the two plates the ball rolls on.
+    """
+
+    mass: float = 3.00e-3
+    inertia: float = 5.48e-7
+    radius: float = 16.6e-3
+    plate_distance: float = 25.5e-3
+
+    def __post_init__(self) -> None:
+        _positive("ball.mass", self.mass)
+        _positive("ball.inertia", self.inertia)
+        _positive("ball.radius", self.radius)
+        _positive("ball.plate_distance", self.plate_distance)
+        _check(self.plate_distance < 2.0 * self.radius, "ball.plate_distance",
+               f"{self.plate_distance} m must be smaller than the ball's diameter "
+               f"{2 * self.radius} m, or the ball falls through the groove")
+
+    @property
+    def rolling_radius(self) -> float:
+        """R = sqrt(R_b^2 - d_f^2 / 4) [m]: distance from the ball centre to the track edge."""
+        return math.sqrt(self.radius**2 - self.plate_distance**2 / 4.0)
+
+
+@dataclass(frozen=True)
+class ContourParams:
+    """Polar contour of the frame, rho(phi) [m].
+
+    ``rho(phi) = a - b cos(2 phi) + sum_k (c_k cos(k phi) + s_k sin(k phi))`` with
+    ``harmonic_orders = k``, ``harmonic_cos = c_k`` [m], ``harmonic_sin = s_k`` [m].
+    """
+
+    a: float = 0.1095
+    b: float = 0.04
+    harmonic_orders: tuple[int, ...] = ()
+    harmonic_cos: tuple[float, ...] = ()
+    harmonic_sin: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        _positive("frame.contour.a", self.a)
+        _finite("frame.contour.b", self.b)
+        n = len(self.harmonic_orders)
+        _check(len(self.harmonic_cos) == n and len(self.harmonic_sin) == n,
+               "frame.contour.harmonic_*",
+               "harmonic_orders, harmonic_cos and harmonic_sin must have equal lengths")
+        for k in self.harmonic_orders:
+            _check(isinstance(k, int) and k >= 1, "frame.contour.harmonic_orders",
+                   f"orders must be integers >= 1, got {k!r}")
+        for c in (*self.harmonic_cos, *self.harmonic_sin):
+            _finite("frame.contour.harmonic_cos/sin", c)
+        amp = abs(self.b) + sum(abs(c) + abs(s) for c, s in
+                                zip(self.harmonic_cos, self.harmonic_sin, strict=True))
+        _check(amp < self.a, "frame.contour",
+               f"harmonic amplitudes ({amp} m) must stay below a ({self.a} m): rho > 0")
+
+
+@dataclass(frozen=True)
+class FrameParams:
+    """The rotating frame: inertia J_f [kg m^2] (with rotor), mass m_f [kg], contour."""
+
+    inertia: float = 1.58e-3
+    mass: float = 0.1
+    contour: ContourParams = field(default_factory=ContourParams)
+
+    def __post_init__(self) -> None:
+        _positive("frame.inertia", self.inertia)
+        _nonnegative("frame.mass", self.mass)
+
+
+@dataclass(frozen=True)
+class EnvironmentParams:
+    """Gravity g [m/s^2] and the shaft's pitch from horizontal, axis_misalignment [rad].
+
+    A shaft pitched by eps tilts the frame's plane; in that plane gravity is g cos(eps).
+    """
+
+    gravity: float = 9.81
+    axis_misalignment: float = 0.0
+
+    def __post_init__(self) -> None:
+        _positive("environment.gravity", self.gravity)
+        _finite("environment.axis_misalignment", self.axis_misalignment)
+        _check(abs(self.axis_misalignment) < math.pi / 2, "environment.axis_misalignment",
+               "must be within (-pi/2, pi/2)")
+
+    @property
+    def in_plane_gravity(self) -> float:
+        """g cos(eps) [m/s^2], gravity's component in the frame's plane."""
+        return self.gravity * math.cos(self.axis_misalignment)
+
+
+@dataclass(frozen=True)
+class JointParams:
+    """Friction in the frame's bearing.
+
+    Torque on the frame: ``-viscous_friction * theta_dot
+    - coulomb_friction * tanh(theta_dot / coulomb_smoothing)``, in [N m s/rad], [N m], [rad/s].
+    """
+
+    viscous_friction: float = 0.0
+    coulomb_friction: float = 0.0
+    coulomb_smoothing: float = 1.0e-3
+
+    def __post_init__(self) -> None:
+        _nonnegative("joint.viscous_friction", self.viscous_friction)
+        _nonnegative("joint.coulomb_friction", self.coulomb_friction)
+        _positive("joint.coulomb_smoothing", self.coulomb_smoothing)
+
+
+@dataclass(frozen=True)
+class ActuatorParams:
+    """Motor: applied torque = torque_gain [-] * command; command clamped to torque_limit [N m]."""
+
+    torque_gain: float = 1.0
+    torque_limit: float = 0.1
+
+    def __post_init__(self) -> None:
+        _positive("actuator.torque_gain", self.torque_gain)
+        _positive("actuator.torque_limit", self.torque_limit)
+
+
+@dataclass(frozen=True)
+class TrackParams:
+    """Imperfections of the track the ball rolls on.
+
+    Attributes
+    ----------
+    rolling_resistance : float
+        mu_rol [-]: a force ``mu_rol * F_n`` opposing the ball's rolling (seed eq. 2.4).
+    rolling_smoothing : float
+        [rad/s] regularisation velocity of the rolling direction's sign.
+    bump_phi, bump_height, bump_width : tuple of float
+        Gaussian bumps added to the contour radius:
+        ``rho += h exp(-d^2 / (2 w^2))`` with d the wrapped angle distance to ``bump_phi``
+        [rad], ``h = bump_height`` [m], ``w = bump_width`` [rad].
+    """
+
+    rolling_resistance: float = 0.0
+    rolling_smoothing: float = 1.0e-3
+    bump_phi: tuple[float, ...] = ()
+    bump_height: tuple[float, ...] = ()
+    bump_width: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        _nonnegative("track.rolling_resistance", self.rolling_resistance)
+        _positive("track.rolling_smoothing", self.rolling_smoothing)
+        n = len(self.bump_phi)
+        _check(len(self.bump_height) == n and len(self.bump_width) == n, "track.bump_*",
+               "bump_phi, bump_height and bump_width must have equal lengths")
+        for v in self.bump_phi:
+            _finite("track.bump_phi", v)
+        for v in self.bump_height:
+            _finite("track.bump_height", v)
+        for v in self.bump_width:
+            _positive("track.bump_width", v)
+
+
+@dataclass(frozen=True)
+class RigParams:
+    """All physical parameters of the rig."""
+
+    ball: BallParams = field(default_factory=BallParams)
+    frame: FrameParams = field(default_factory=FrameParams)
+    environment: EnvironmentParams = field(default_factory=EnvironmentParams)
+    joint: JointParams = field(default_factory=JointParams)
+    actuator: ActuatorParams = field(default_factory=ActuatorParams)
+    track: TrackParams = field(default_factory=TrackParams)
+
+    def __post_init__(self) -> None:
+        from bfr_sim.geometry import OffsetCurve  # noqa: PLC0415 (geometry imports params)
+
+        curve = OffsetCurve.from_params(self)
+        lam_min = curve.min_speed()
+        _check(lam_min > 0.0, "frame.contour / track.bump_*",
+               "the ball-centre curve has a cusp (a concave part of the track is sharper "
+               f"than the rolling radius R = {self.ball.rolling_radius:.4g} m; min |p'| = "
+               f"{lam_min:.3g} m/rad): widen the bumps or use the contact model")
+
+    def replace(self, **changes: Any) -> RigParams:
+        """Return a copy with dotted-name changes, e.g. ``replace(**{"ball.mass": 3e-3})``."""
+        d = params_to_dict(self)
+        for key, value in changes.items():
+            node = d
+            parts = key.split(".")
+            for p in parts[:-1]:
+                if p not in node or not isinstance(node[p], dict):
+                    raise ParameterError(f"parameter {key}: unknown group {p!r}")
+                node = node[p]
+            if parts[-1] not in node:
+                raise ParameterError(f"parameter {key}: unknown name {parts[-1]!r}")
+            node[parts[-1]] = value
+        return params_from_dict(d)
+
+
+def default_params_path() -> Path:
+    """Path of the shipped ``rig.yaml`` (installed share folder or the source tree)."""
+    here = Path(__file__).resolve().parent
+    candidates = [here.parent / "config" / "rig.yaml"]
+    try:
+        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
+
+        candidates.append(Path(get_package_share_directory("bfr_sim")) / "config" / "rig.yaml")
+    except Exception:  # noqa: BLE001 (not installed as an ament package: source tree only)
+        pass
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise ParameterError(f"rig.yaml not found; looked in {[str(c) for c in candidates]}")
+
+
+def _ros_parameters(doc: Any, path: str) -> dict[str, Any]:
+    """Extract the ``ros__parameters`` mapping of a ROS 2 parameter file."""
+    if not isinstance(doc, Mapping) or not doc:
+        raise ParameterError(f"{path}: not a ROS 2 parameter file (expected a mapping)")
+    if "ros__parameters" in doc:
+        return dict(doc["ros__parameters"])
+    for node_name, body in doc.items():
+        if isinstance(body, Mapping) and "ros__parameters" in body:
+            return dict(body["ros__parameters"])
+        raise ParameterError(f"{path}: node entry {node_name!r} has no ros__parameters")
+    raise ParameterError(f"{path}: no ros__parameters section")
+
+
+def _group(d: Mapping[str, Any], name: str) -> dict[str, Any]:
+    g = d.get(name, {})
+    if not isinstance(g, Mapping):
+        raise ParameterError(f"parameter {name}: expected a group, got {g!r}")
+    return dict(g)
+
+
+def _build(cls: type, d: Mapping[str, Any], prefix: str) -> Any:
+    names = {f.name for f in dataclasses.fields(cls)}
+    unknown = set(d) - names
+    if unknown:
+        raise ParameterError(f"parameter {prefix}: unknown entries {sorted(unknown)}")
+    kwargs: dict[str, Any] = {}
+    for f in dataclasses.fields(cls):
+        if f.name not in d:
+            continue
+        v = d[f.name]
+        if isinstance(v, list):
+            v = tuple(v)
+        kwargs[f.name] = v
+    try:
+        return cls(**kwargs)
+    except TypeError as exc:
+        raise ParameterError(f"parameter {prefix}: {exc}") from exc
+
+
+def _drop_zero_entries(orders_or_pos: tuple, *values: tuple) -> tuple[tuple, ...]:
+    """Drop list entries whose amplitudes are all zero (ROS lists cannot be empty)."""
+    keep = [i for i in range(len(orders_or_pos)) if any(v[i] != 0.0 for v in values)]
+    return (tuple(orders_or_pos[i] for i in keep), *(tuple(v[i] for i in keep) for v in values))
+
+
+def params_from_dict(d: Mapping[str, Any]) -> RigParams:
+    """Build :class:`RigParams` from the nested ``ros__parameters`` mapping."""
+    known = {"ball", "frame", "environment", "joint", "actuator", "track"}
+    unknown = set(d) - known
+    if unknown:
+        raise ParameterError(f"unknown parameter groups {sorted(unknown)}")
+    frame = _group(d, "frame")
+    contour = _group(frame, "contour")
+    orders = tuple(int(k) for k in contour.get("harmonic_orders", ()))
+    ccos = tuple(float(c) for c in contour.get("harmonic_cos", ()))
+    csin = tuple(float(c) for c in contour.get("harmonic_sin", ()))
+    if len(ccos) == len(orders) == len(csin):
+        orders, ccos, csin = _drop_zero_entries(orders, ccos, csin)
+    contour.update(harmonic_orders=orders, harmonic_cos=ccos, harmonic_sin=csin)
+    frame["contour"] = _build(ContourParams, contour, "frame.contour")
+    track = _group(d, "track")
+    pos = tuple(float(v) for v in track.get("bump_phi", ()))
+    hgt = tuple(float(v) for v in track.get("bump_height", ()))
+    wid = tuple(float(v) for v in track.get("bump_width", ()))
+    if len(pos) == len(hgt) == len(wid):
+        pos, hgt, wid = (tuple(pos[i] for i in range(len(pos)) if hgt[i] != 0.0),
+                         tuple(h for h in hgt if h != 0.0),
+                         tuple(wid[i] for i in range(len(pos)) if hgt[i] != 0.0))
+    track.update(bump_phi=pos, bump_height=hgt, bump_width=wid)
+    return RigParams(
+        ball=_build(BallParams, _group(d, "ball"), "ball"),
+        frame=_build(FrameParams, frame, "frame"),
+        environment=_build(EnvironmentParams, _group(d, "environment"), "environment"),
+        joint=_build(JointParams, _group(d, "joint"), "joint"),
+        actuator=_build(ActuatorParams, _group(d, "actuator"), "actuator"),
+        track=_build(TrackParams, track, "track"),
+    )
+
+
+def load_params(path: str | Path | None = None) -> RigParams:
+    """Load rig parameters from a ROS 2 parameter YAML file (default: the shipped rig.yaml).
+
+    Raises
+    ------
+    ParameterError
+        If the file is missing, is not a parameter file, or a value is invalid.
+    """
+    p = Path(path) if path is not None else default_params_path()
+    try:
+        text = p.read_text()
+    except OSError as exc:
+        raise ParameterError(f"cannot read parameter file {p}: {exc}") from exc
+    try:
+        doc = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        raise ParameterError(f"{p}: invalid YAML: {exc}") from exc
+    try:
+        return params_from_dict(_ros_parameters(doc, str(p)))
+    except ParameterError as exc:
+        raise ParameterError(f"{p}: {exc}") from exc
+
+
+def params_to_dict(params: RigParams) -> dict[str, Any]:
+    """Nested plain-dict form of the parameters (tuples as lists)."""
+
+    def conv(obj: Any) -> Any:
+        if dataclasses.is_dataclass(obj):
+            return {f.name: conv(getattr(obj, f.name)) for f in dataclasses.fields(obj)}
+        if isinstance(obj, tuple):
+            return [conv(v) for v in obj]
+        return obj
+
+    return conv(params)
+
+
+def params_to_ros_yaml(params: RigParams, header: str = "") -> str:
+    """Serialise parameters as a ROS 2 parameter file loadable by :func:`load_params`.
+
+    Empty lists become one zero entry, since ROS 2 cannot type an empty list.
+    """
+    d = params_to_dict(params)
+    c = d["frame"]["contour"]
+    if not c["harmonic_orders"]:
+        c.update(harmonic_orders=[4], harmonic_cos=[0.0], harmonic_sin=[0.0])
+    t = d["track"]
+    if not t["bump_phi"]:
+        t.update(bump_phi=[0.0], bump_height=[0.0], bump_width=[0.05])
+    body = yaml.safe_dump({"/**": {"ros__parameters": d}}, sort_keys=False)
+    lines = [f"# {h}" for h in header.splitlines()] if header else []
+    return "\n".join([*lines, body])

@@ -1,0 +1,113 @@
+"""Geometry of the contour and of the ball-centre curve, and the parameter file."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bfr_sim.geometry import OffsetCurve
+from bfr_sim.params import ParameterError, RigParams, load_params, params_to_ros_yaml
+
+NOMINAL = load_params()
+
+
+@pytest.fixture(scope="module")
+def curve() -> OffsetCurve:
+    return OffsetCurve.from_params(NOMINAL.replace(**{
+        "frame.contour.harmonic_orders": [3], "frame.contour.harmonic_cos": [1e-3],
+        "frame.contour.harmonic_sin": [-5e-4], "track.bump_phi": [1.0],
+        "track.bump_height": [3e-4], "track.bump_width": [0.08]}))
+
+
+def test_offset_curve_is_at_rolling_radius_along_the_normal(curve: OffsetCurve) -> None:
+    phi = np.linspace(0, 2 * np.pi, 1001)
+    d = curve.point(phi) - curve.contour_point(phi)
+    np.testing.assert_allclose(np.linalg.norm(d, axis=-1), curve.arrays.rolling_radius,
+                               rtol=1e-13)
+    n = curve.normal(phi)
+    np.testing.assert_allclose(d, curve.arrays.rolling_radius * n, atol=1e-15)
+    # the normal points outward (away from the axis, on this star-shaped frame)
+    assert np.all(np.einsum("ij,ij->i", n, curve.contour_point(phi)) > 0)
+
+
+def test_derivatives_match_finite_differences(curve: OffsetCurve) -> None:
+    phi = np.linspace(0.05, 6.2, 37)
+    p, p1, p2, p3 = curve.derivatives(phi)
+    h = 1e-5
+    pp, pm = curve.point(phi + h), curve.point(phi - h)
+    np.testing.assert_allclose(p1, (pp - pm) / (2 * h), atol=1e-8)
+    _, p1p, p2p, _ = curve.derivatives(phi + h)
+    _, p1m, p2m, _ = curve.derivatives(phi - h)
+    np.testing.assert_allclose(p2, (p1p - p1m) / (2 * h), atol=1e-7)
+    np.testing.assert_allclose(p3, (p2p - p2m) / (2 * h), atol=2e-6)
+    np.testing.assert_allclose(curve.speed(phi), np.linalg.norm(p1, axis=-1), rtol=1e-13)
+
+
+def test_curvature_of_offset_curve(curve: OffsetCurve) -> None:
+    """Offset of a curve by R: 1/kappa_p = 1/kappa_delta + R (same centres of curvature)."""
+    phi = np.linspace(0, 2 * np.pi, 200)
+    k_d = curve.contour_curvature(phi)
+    k_p = curve.curvature(phi)
+    np.testing.assert_allclose(1 / k_p, 1 / k_d + curve.arrays.rolling_radius, rtol=1e-10)
+
+
+def test_waist_is_concave_wing_convex() -> None:
+    c = OffsetCurve.from_params(NOMINAL)
+    assert float(c.contour_curvature(0.0)) < 0.0  # waist: a valley
+    assert float(c.contour_curvature(np.pi / 2)) > 0.0  # wing tip: a hill
+
+
+def test_ball_angle_inverse(curve: OffsetCurve) -> None:
+    phi = np.linspace(-7.0, 7.0, 301)
+    psi = curve.ball_angle(phi)
+    np.testing.assert_allclose(curve.phi_from_ball_angle(psi), phi, atol=1e-12)
+    p = curve.point(phi)
+    np.testing.assert_allclose(np.mod(psi, 2 * np.pi),
+                               np.mod(np.arctan2(p[:, 0], p[:, 1]), 2 * np.pi), atol=1e-12)
+
+
+def test_arc_length(curve: OffsetCurve) -> None:
+    from scipy.integrate import quad
+
+    for a, b in [(0.0, 1.3), (0.4, 5.9)]:
+        ref = quad(lambda x: float(curve.speed(x)), a, b, epsabs=1e-14, limit=200)[0]
+        assert float(curve.arc_length(b) - curve.arc_length(a)) == pytest.approx(ref, rel=1e-10)
+    per = curve.perimeter()
+    assert float(curve.arc_length(2 * np.pi + 0.3) - curve.arc_length(0.3)) == pytest.approx(per)
+
+
+def test_parameter_file_round_trip(tmp_path) -> None:  # noqa: ANN001
+    p = NOMINAL.replace(**{"joint.coulomb_friction": 2e-3, "track.bump_phi": [0.5],
+                           "track.bump_height": [1e-4], "track.bump_width": [0.1]})
+    f = tmp_path / "p.yaml"
+    f.write_text(params_to_ros_yaml(p, header="test"))
+    assert load_params(f) == p
+    assert load_params() == RigParams()  # the shipped file is the seed's nominal set
+
+
+@pytest.mark.parametrize(("text", "needle"), [
+    ("/**:\n  ros__parameters:\n    ball:\n      mass: -1.0\n", "ball.mass"),
+    ("/**:\n  ros__parameters:\n    ball:\n      masss: 1.0\n", "masss"),
+    ("/**:\n  ros__parameters:\n    ball:\n      plate_distance: 0.04\n", "plate_distance"),
+    ("/**:\n  ros__parameters:\n    track:\n      bump_phi: [0.0]\n      bump_height: [0.003]\n"
+     "      bump_width: [0.005]\n", "cusp"),
+    ("just a string", "not a ROS 2 parameter file"),
+    ("/**:\n  ros__parameters:\n    ball: {mass: .nan}\n", "finite"),
+])
+def test_bad_parameter_files_name_the_problem(tmp_path, text: str, needle: str) -> None:  # noqa: ANN001
+    f = tmp_path / "bad.yaml"
+    f.write_text(text)
+    with pytest.raises(ParameterError, match=needle):
+        load_params(f)
+
+
+def test_missing_parameter_file_is_a_clear_error(tmp_path) -> None:  # noqa: ANN001
+    with pytest.raises(ParameterError, match="cannot read"):
+        load_params(tmp_path / "nope.yaml")
+
+
+def test_rolling_radius_formula() -> None:
+    b = NOMINAL.ball
+    assert b.rolling_radius == pytest.approx(math.sqrt(0.0166**2 - 0.0255**2 / 4))
