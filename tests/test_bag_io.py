@@ -1,0 +1,338 @@
+"""ROS 2 bag I/O: round trips, custom types, remapping, truncation, killed writers."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from bfr_sim.io.bag import (
+    BagError,
+    BagWarning,
+    BagWriter,
+    find_msg_dirs,
+    make_typestore,
+    read_bag,
+    read_bag_messages,
+    write_recording_bag,
+)
+from bfr_sim.recording import Recording
+from mcap.reader import make_reader
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def rig_like(n: int = 400) -> Recording:
+    t = 4.0 + np.arange(n) * 1.1e-3
+    theta = 0.3 * np.sin(3 * t)
+    held = (np.arange(n) // 6) * 6
+    valid = np.ones(n, bool)
+    valid[100:140] = False
+    bx, by = 0.01 * np.cos(t[held]), 0.085 + 0.001 * np.sin(t[held])
+    return Recording(t=t, theta=theta, theta_dot=0.9 * np.cos(3 * t),
+                     torque=np.clip(np.sin(7 * t) / 5, -0.1, 0.1), ball_x=bx, ball_y=by,
+                     ball_valid=valid, phi=theta[held] + np.arctan2(bx, by),
+                     phi_dot=np.where(valid, 0.5, np.nan),
+                     extra={"phi_rig": np.linspace(0, 1, n)},
+                     meta={"source": "x.txt", "source_kind": "ntnu_rig_log",
+                           "rig_conventions": {"theta_sign": 1}})
+
+
+def sim_like(n: int = 300) -> Recording:
+    t = np.arange(n) * 1e-3
+    theta, phi_c = 0.5 * t, 0.1 + 2.0 * t
+    ang = phi_c - theta + 0.005
+    ball = 0.1 * np.c_[np.sin(ang), np.cos(ang)]
+    x = np.c_[theta, phi_c, np.full(n, 0.5), np.full(n, 2.0), np.zeros(n), np.zeros(n)]
+    return Recording.from_sim(SimpleNamespace(t=t, x=x, u=np.full(n, 0.003), ball=ball,
+                                              kinetic=np.full(n, 1e-3),
+                                              potential=np.linspace(0, 1e-3, n), info={}))
+
+
+def test_custom_msg_dirs_found_in_source_tree() -> None:
+    dirs = find_msg_dirs()
+    assert REPO / "src" / "bfr_interfaces" / "msg" in dirs
+    store = make_typestore()
+    for name in ("BallObservation", "ControllerState", "SimTruth"):
+        assert f"bfr_interfaces/msg/{name}" in store.types
+
+
+def test_round_trip_rig_like(tmp_path: Path) -> None:
+    rec = rig_like()
+    write_recording_bag(tmp_path / "bag", rec)
+    assert (tmp_path / "bag" / "metadata.yaml").exists()
+    assert (tmp_path / "bag" / "bag.mcap").exists()
+    back = read_bag(tmp_path / "bag")
+    assert rec.differences(back, rtol=0, atol=1e-9) == []
+    assert back.meta["rig_conventions"] == {"theta_sign": 1}
+    assert back.meta["original_source"] == "x.txt"
+    assert back.meta["bag_complete"] is True
+    assert set(back.meta["bag_topics"]) == {"joint_states", "command", "ball", "controller"}
+
+
+def test_round_trip_simulation_with_truth(tmp_path: Path) -> None:
+    rec = sim_like()
+    write_recording_bag(tmp_path / "bag", rec)
+    back = read_bag(tmp_path / "bag")
+    assert rec.differences(back, rtol=0, atol=1e-9) == []
+    assert back.has_truth and "truth" in back.meta["bag_topics"]
+
+
+def test_remapped_topics_and_slashes(tmp_path: Path) -> None:
+    rec = sim_like(50)
+    write_recording_bag(tmp_path / "bag", rec, topics={"joint_states": "rig/joint_states",
+                                                      "sim_truth": "gt"}, leading_slash=False)
+    with pytest.raises(BagError, match=r"no messages on 'joint_states'.*'rig/joint_states'"):
+        read_bag(tmp_path / "bag")
+    back = read_bag(tmp_path / "bag", topic_map={"joint_states": "/rig/joint_states",
+                                                 "truth": "/gt"})
+    assert rec.differences(back, atol=1e-9) == []
+    with pytest.raises(BagError, match="unknown topic role"):
+        read_bag(tmp_path / "bag", topic_map={"camera": "x"})
+
+
+def test_bag_is_standard_rosbag2_mcap(tmp_path: Path) -> None:
+    """Independent readers (rosbags' rosbag2 Reader, mcap's indexed reader) accept it."""
+
+    rec = rig_like(60)
+    write_recording_bag(tmp_path / "bag", rec)
+    store = get_typestore(Stores.ROS2_JAZZY)
+    with Reader(tmp_path / "bag") as reader:
+        types = {c.topic: c.msgtype for c in reader.connections}
+        assert types["/joint_states"] == "sensor_msgs/msg/JointState"
+        assert types["/ball_observation"] == "bfr_interfaces/msg/BallObservation"
+        for c in reader.connections:
+            if c.msgtype not in store.types:
+                store.register(get_types_from_msg(c.msgdef.data, c.msgtype))
+        n_js = 0
+        for conn, ts, raw in reader.messages():
+            msg = store.deserialize_cdr(raw, conn.msgtype)
+            if conn.topic == "/joint_states":
+                assert msg.name == ["frame_joint"]
+                assert msg.position[0] == pytest.approx(rec.theta[n_js])
+                assert ts == round(rec.t[n_js] * 1e9)
+                n_js += 1
+        assert n_js == 60
+    with (tmp_path / "bag" / "bag.mcap").open("rb") as fh:
+        r = make_reader(fh)
+        assert r.get_header().profile == "ros2"
+        summary = r.get_summary()
+        assert summary is not None
+        assert {s.encoding for s in summary.schemas.values()} == {"ros2msg"}
+        assert {c.message_encoding for c in summary.channels.values()} == {"cdr"}
+
+
+def test_truncated_bag_keeps_complete_chunks(tmp_path: Path) -> None:
+    rec = sim_like(2500)
+    write_recording_bag(tmp_path / "full", rec)
+    data = (tmp_path / "full" / "full.mcap").read_bytes()
+    cut = tmp_path / "cut"
+    cut.mkdir()
+    (cut / "cut.mcap").write_bytes(data[: int(len(data) * 0.7)])  # no metadata.yaml either
+    with pytest.warns(BagWarning, match=r"cut.mcap: truncated or corrupt.*file ends inside"):
+        part = read_bag(cut)
+    assert 0 < len(part) < len(rec)
+    assert np.allclose(part.t, rec.t[: len(part)], rtol=0, atol=1e-9)
+    assert np.allclose(part.phi_true, rec.phi_true[: len(part)])
+    assert part.meta["bag_complete"] is False and part.meta["warnings"]
+    with pytest.raises(BagError, match=r"cut.mcap: truncated or corrupt"):
+        read_bag(cut, strict=True)
+    (cut / "cut.mcap").write_bytes(data[:2000])  # inside the first chunk: nothing usable
+    with pytest.raises(BagError, match=r"no messages on 'joint_states'.*truncated"), \
+            pytest.warns(BagWarning):
+        read_bag(cut / "cut.mcap")
+
+
+@pytest.mark.parametrize(("content", "message"), [
+    (b"", "empty file"),
+    (b"hello world, not a bag at all", "not an MCAP file"),
+])
+def test_corrupt_files(tmp_path: Path, content: bytes, message: str) -> None:
+    p = tmp_path / "x.mcap"
+    p.write_bytes(content)
+    with pytest.raises(BagError, match=message):
+        read_bag(p)
+
+
+def test_bad_paths(tmp_path: Path) -> None:
+    with pytest.raises(BagError, match="no such bag"):
+        read_bag(tmp_path / "missing")
+    (tmp_path / "empty_dir").mkdir()
+    with pytest.raises(BagError, match=r"no metadata.yaml and 0 .mcap files"):
+        read_bag(tmp_path / "empty_dir")
+    d = tmp_path / "badmeta"
+    d.mkdir()
+    (d / "metadata.yaml").write_text("rosbag2_bagfile_information: {storage_identifier: x}\n")
+    with pytest.raises(BagError, match="unsupported storage 'x'"):
+        read_bag(d)
+
+
+def test_writer_errors(tmp_path: Path) -> None:
+    with BagWriter(tmp_path / "b") as bag:
+        with pytest.raises(BagError, match="unknown message type 'nope/msg/Nope'"):
+            bag.write("/x", "nope/msg/Nope", b"\x00\x01\x00\x00", 0)
+        store = bag.typestore
+        f64 = store.types["std_msgs/msg/Float64"]
+        bag.write_message("/x", f64(data=1.5), 10)
+        with pytest.raises(BagError, match="already has type 'std_msgs/msg/Float64'"):
+            bag.write("/x", "std_msgs/msg/String", b"", 11)
+        with pytest.raises(BagError, match="negative timestamp"):
+            bag.write_message("/x", f64(data=1.5), -1)
+    assert bag.closed and bag.message_count == 1
+    bag.close()  # idempotent
+    with pytest.raises(BagError, match="exists already"):
+        BagWriter(tmp_path / "b")
+    with pytest.raises(BagError, match=r"t = -1.0 s < 0"):
+        write_recording_bag(tmp_path / "neg", Recording(
+            t=[-1.0, 0.0], theta=[0, 0], theta_dot=[0, 0], torque=[0, 0], ball_x=[0, 0],
+            ball_y=[0, 0], ball_valid=[False, False], phi=[0, 0]))
+
+
+CHILD = textwrap.dedent("""
+    import os, sys, time
+    import numpy as np
+    from bfr_sim.io.bag import BagWriter
+    mode, path = sys.argv[1], sys.argv[2]
+    bag = BagWriter(path, chunk_size=4096, flush_interval=None)
+    T = bag.typestore.types
+    def js(k):
+        m = T["sensor_msgs/msg/JointState"](
+            header=T["std_msgs/msg/Header"](stamp=T["builtin_interfaces/msg/Time"](
+                sec=k // 1000, nanosec=(k % 1000) * 1000000), frame_id=""),
+            name=["frame_joint"], position=np.array([0.001 * k]),
+            velocity=np.array([1.0]), effort=np.array([0.0]))
+        return bag.typestore.serialize_cdr(m, "sensor_msgs/msg/JointState")
+    n = 0
+    if mode == "kill":
+        for k in range(500):
+            bag.write("/joint_states", "sensor_msgs/msg/JointState", js(k), k * 1000000)
+        bag.flush()
+        for k in range(500, 520):  # pending in memory: lost by the kill
+            bag.write("/joint_states", "sensor_msgs/msg/JointState", js(k), k * 1000000)
+        os._exit(0)
+    try:
+        print("ready", flush=True)
+        while True:
+            bag.write("/joint_states", "sensor_msgs/msg/JointState", js(n), n * 1000000)
+            n += 1
+            time.sleep(0.0005)
+    except KeyboardInterrupt:
+        bag.close()
+        print(n, flush=True)
+""")
+
+
+def child_env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO / "src" / "bfr_sim"),
+                                         env.get("PYTHONPATH", "")])
+    return env
+
+
+def test_killed_writer_keeps_flushed_messages(tmp_path: Path) -> None:
+    subprocess.run([sys.executable, "-c", CHILD, "kill", str(tmp_path / "k")], check=True,
+                   env=child_env(), timeout=60)
+    assert not (tmp_path / "k" / "metadata.yaml").exists()
+    with pytest.warns(BagWarning):
+        rec = read_bag(tmp_path / "k")
+    assert 500 <= len(rec) < 520
+    assert np.allclose(rec.theta, 0.001 * np.arange(len(rec)))
+    assert rec.meta["bag_complete"] is False
+
+
+def test_sigint_recorder_loses_nothing(tmp_path: Path) -> None:
+    proc = subprocess.Popen([sys.executable, "-c", CHILD, "sigint", str(tmp_path / "s")],
+                            stdout=subprocess.PIPE, text=True, env=child_env())
+    assert proc.stdout is not None
+    assert proc.stdout.readline().strip() == "ready"
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGINT)
+    out, _ = proc.communicate(timeout=30)
+    written = int(out.strip())
+    assert written > 10
+    rec = read_bag(tmp_path / "s", strict=True)  # complete: footer and metadata.yaml
+    assert len(rec) == written
+    assert (tmp_path / "s" / "metadata.yaml").exists()
+
+
+def test_sqlite3_bag(tmp_path: Path) -> None:
+
+    store = make_typestore()
+    T = store.types
+    with Writer(tmp_path / "sq", version=9, storage_plugin=StoragePlugin.SQLITE3) as w:
+        c1 = w.add_connection("/joint_states", "sensor_msgs/msg/JointState", typestore=store)
+        c2 = w.add_connection("/effort_controller/commands", "std_msgs/msg/Float64MultiArray",
+                              typestore=store)
+        for k in range(20):
+            stamp = T["builtin_interfaces/msg/Time"](sec=1, nanosec=k * 1000000)
+            js = T["sensor_msgs/msg/JointState"](
+                header=T["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
+                name=["frame_joint"], position=np.array([0.1 * k]), velocity=np.array([2.0]),
+                effort=np.array([]))
+            w.write(c1, 1_000_000_000 + k * 1_000_000,
+                    store.serialize_cdr(js, "sensor_msgs/msg/JointState"))
+            cmd = T["std_msgs/msg/Float64MultiArray"](
+                layout=T["std_msgs/msg/MultiArrayLayout"](dim=[], data_offset=0),
+                data=np.array([0.01 * k]))
+            w.write(c2, 1_000_000_000 + k * 1_000_000,
+                    store.serialize_cdr(cmd, "std_msgs/msg/Float64MultiArray"))
+    rec = read_bag(tmp_path / "sq")
+    assert rec.meta["bag_storage"] == "sqlite3"
+    assert np.allclose(rec.t, 1.0 + 0.001 * np.arange(20))
+    assert np.allclose(rec.torque, 0.01 * np.arange(20))
+    assert not rec.ball_valid.any()
+
+
+def test_custom_type_from_other_msg_dir_read_without_it(tmp_path: Path) -> None:
+    """Definitions travel in the bag: reading needs no .msg files."""
+    pkg = tmp_path / "bfr_test_msgs" / "msg"
+    pkg.mkdir(parents=True)
+    (pkg / "Probe.msg").write_text("std_msgs/Header header\nfloat64 value  # [m]\n")
+    with BagWriter(tmp_path / "b", msg_dirs=[pkg]) as bag:
+        T = bag.typestore.types
+        probe = T["bfr_test_msgs/msg/Probe"](header=T["std_msgs/msg/Header"](
+            stamp=T["builtin_interfaces/msg/Time"](sec=0, nanosec=5), frame_id="w"), value=2.5)
+        bag.write_message("/probe", probe, 5)
+    contents = read_bag_messages(tmp_path / "b")
+    assert "bfr_test_msgs/msg/Probe" in contents.schemas
+
+    store = get_typestore(Stores.ROS2_JAZZY)
+    store.register(get_types_from_msg(contents.schemas["bfr_test_msgs/msg/Probe"],
+                                      "bfr_test_msgs/msg/Probe"))
+    msg = store.deserialize_cdr(contents.messages[0].data, "bfr_test_msgs/msg/Probe")
+    assert msg.value == 2.5 and msg.header.frame_id == "w"
+
+
+def test_rclpy_serialised_bytes(tmp_path: Path) -> None:
+    """A recorder node hands rclpy's CDR bytes to BagWriter; read_bag decodes them."""
+    rclpy_ser = pytest.importorskip("rclpy.serialization", reason="rclpy not installed")
+    sensor_msgs = pytest.importorskip("sensor_msgs.msg", reason="sensor_msgs not installed")
+    with BagWriter(tmp_path / "r") as bag:
+        for k in range(5):
+            m = sensor_msgs.JointState()
+            m.header.stamp.sec, m.header.stamp.nanosec = 2, k * 1000
+            m.name = ["frame_joint"]
+            m.position, m.velocity, m.effort = [0.5 * k], [1.0], [0.01]
+            bag.write("/joint_states", "sensor_msgs/msg/JointState",
+                      rclpy_ser.serialize_message(m), 2_000_000_000 + k * 1000)
+    rec = read_bag(tmp_path / "r")
+    assert np.allclose(rec.theta, 0.5 * np.arange(5))
+    assert np.allclose(rec.torque, 0.01)
+
+
+def test_cleanup_unused(tmp_path: Path) -> None:
+    """Writing into an existing directory is refused before anything is created."""
+    (tmp_path / "exists").mkdir()
+    with pytest.raises(BagError, match="exists already"):
+        write_recording_bag(tmp_path / "exists", sim_like(5))
+    shutil.rmtree(tmp_path / "exists")

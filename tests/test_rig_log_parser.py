@@ -1,0 +1,214 @@
+"""Parser of the NTNU rig terminal logs: synthetic malformed input and every shipped log."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from bfr_sim.io.rig_log import (
+    RigLogError,
+    RigLogWarning,
+    parse_rig_log,
+    parse_rig_log_text,
+    read_rig_log,
+)
+
+DATA = Path(os.environ.get("BFR_RIG_DATA", Path(__file__).resolve().parents[1].parent
+                           / "shared" / "data" / "ntnu-rig"))
+needs_data = pytest.mark.skipif(not DATA.is_dir(),
+                                reason=f"NTNU rig logs not found at {DATA} (CI has ../shared "
+                                       f"beside the clone; set BFR_RIG_DATA to override)")
+
+
+def line(t: float, theta: float = 1.0, x: float = 0.01, y: float = 0.08, **kw: float) -> str:
+    v = {"t": t, "torque": 0.01, "theta": theta, "phi": theta + np.arctan2(x, y), "dtheta": 0.5,
+         "dphi": 0.4, "x": x, "y": y, **kw}
+    return "[inf] " + ",".join(f"{k}={v[k]:g}" if isinstance(v[k], float) else f"{k}={v[k]}"
+                               for k in ("t", "torque", "theta", "phi", "dtheta", "dphi", "x",
+                                         "y")) + "\r"
+
+
+def body(n: int = 20, t0: float = 4.0) -> list[str]:
+    return [line(t0 + 0.001 * i, theta=1.0 + 0.002 * i, x=0.01 + 0.001 * (i // 5))
+            for i in range(n)]
+
+
+NOISE = [
+    "Script started on fre 26 mar 2021 12:12:54",
+    "\x1b]0;butterfly@nuc: ~\x07\x1b[01;32mbutterfly@nuc\x1b[00m:\x1b[01;34m~\x1b[00m$ ./o\r"
+    "verturn.sh\r",
+    "[ 13%] Built target cppmisc\r",
+    "[inf] initializing hardware..\r",
+    "[inf] done\r",
+]
+
+
+def test_clean_log_with_noise() -> None:
+    text = "\n".join([*NOISE, *body(), "[obs] z=1,w=2\r", "", "[inf] stopped\r"]) + "\n"
+    log = parse_rig_log_text(text, "mem")
+    assert log.n_data == 20 and len(log.runs) == 1
+    assert log.skipped == {"terminal": 3, "info": 3, "obs": 1, "empty": 1}
+    assert log.warnings == []
+    rec = log.recording()
+    assert len(rec) == 20
+    assert rec.meta["source_kind"] == "ntnu_rig_log" and rec.meta["skipped"] == log.skipped
+    assert np.all(np.diff(rec.t) > 0)
+
+
+def test_data_line_behind_escape_codes_and_carriage_return_is_recovered() -> None:
+    rows = body(5)
+    rows[2] = "\x1b[K\x1b[A\rgarbage typed\r" + rows[2]
+    log = parse_rig_log_text("\n".join(rows) + "\n")
+    assert log.n_data == 5 and log.skipped == {}
+
+
+def test_truncated_final_line_is_a_warning() -> None:
+    text = "\n".join(body(10)) + "\n[inf] t=4.0101,torque=0.01,theta=1.0"
+    log = parse_rig_log_text(text, "mem")
+    assert log.n_data == 10
+    assert log.skipped == {"truncated_final": 1}
+    assert log.warnings and "mem:11: truncated final line" in log.warnings[0]
+
+
+def test_truncated_final_line_warns_from_file(tmp_path: Path) -> None:
+    p = tmp_path / "log.txt"
+    p.write_text("\n".join(body(10)) + "\n[inf] t=4.01")
+    with pytest.warns(RigLogWarning, match="log.txt:11: truncated final line"):
+        rec = read_rig_log(p)
+    assert len(rec) == 10
+
+
+def test_partial_line_mid_file_is_skipped_with_warning() -> None:
+    rows = body(10)
+    rows.insert(5, "[inf] t=4.0045,torque=0.0")
+    log = parse_rig_log_text("\n".join(rows) + "\n", "mem")
+    assert log.n_data == 10 and log.skipped == {"partial": 1}
+    assert "mem:6: partial data line" in log.warnings[0]
+
+
+def test_two_runs_split_at_restart_marker() -> None:
+    text = "\n".join([*NOISE, *body(10), "[inf] stopped\r", *NOISE[3:], *body(30, t0=4.0)])
+    log = parse_rig_log_text(text + "\n")
+    assert [len(r) for r in log.runs] == [10, 30]
+    assert len(log.recording()) == 30  # default: the longest run
+    assert len(log.recording(run=0)) == 10
+    assert log.recording(run=-1).meta["run"] == 1
+    with pytest.raises(RigLogError, match="run 5 requested but the log holds 2"):
+        log.recording(run=5)
+
+
+def test_duplicate_timestamps_dropped_or_rejected() -> None:
+    rows = body(10)
+    rows[4] = line(4.003, theta=9.0)  # same t as row 3, different data (print rounding)
+    log = parse_rig_log_text("\n".join(rows) + "\n", "mem")
+    assert log.skipped == {"duplicate_time": 1} and len(log.runs[0]) == 9
+    with pytest.raises(RigLogError, match=r"mem:5: duplicate timestamp t=4.003 \(same as line 4"):
+        parse_rig_log_text("\n".join(rows) + "\n", "mem", duplicates="error")
+
+
+def test_ball_lost_event_invalidates_held_fix() -> None:
+    rows = body(40)
+    rows.insert(22, "[inf] ball was lost\r")
+    rec = parse_rig_log_text("\n".join(rows) + "\n").recording()
+    assert rec.ball_valid[:22].all()
+    # held fix invalid after the message until the next new fix (x changes every 5 samples)
+    assert not rec.ball_valid[22:25].any() and rec.ball_valid[25:].all()
+
+
+def test_no_ball_and_stale_fix_are_invalid() -> None:
+    rows = [line(4.0 + 0.001 * i, x=0.0, y=0.0) for i in range(50)]
+    rows += [line(4.05 + 0.001 * i, x=0.02, y=0.08) for i in range(200)]  # one fix, held
+    rec = parse_rig_log_text("\n".join(rows) + "\n").recording(stale_after=0.1)
+    assert not rec.ball_valid[:50].any()
+    assert rec.ball_valid[50:150].all() and not rec.ball_valid[152:].any()
+    assert rec.camera_fix_rate() != rec.camera_fix_rate()  # NaN: a single fix
+
+
+@pytest.mark.parametrize(("text", "message"), [
+    ("", "file is empty"),
+    ("   \n\r\n", "file is empty"),
+    ("\n".join(NOISE) + "\n", r"no data lines .* skipped info: 2, terminal: 3"),
+    ("\n".join([*body(3), "[inf] t=4.1,torque=0.01,theta=1,dtheta=0,dphi=0,x=0,y=0",
+                *body(3, 4.2)]), r"mem:4: malformed data line: missing key\(s\) 'phi'"),
+    ("\n".join([*body(3), line(4.1, theta=float("nan")), *body(3, 4.2)]),
+     r"mem:4: non-finite value theta='nan'"),
+    ("\n".join([*body(3), line(4.1, x=float("inf")), *body(3, 4.2)]),
+     r"mem:4: non-finite value x='inf'"),
+    ("\n".join([*body(3), line(4.1).replace("theta=1", "theta=1.0.2"), *body(3, 4.2)]),
+     r"mem:4: value of 'theta' is not a number: '1.0.2'"),
+    ("\n".join([*body(5), *body(5, 3.0)]),
+     r"mem:6: time goes backwards from t=4.004 \(line 5\) to t=3.0 without a restart"),
+    ("\n".join([*body(3), line(4.1).replace("dphi=", "dpsi="), *body(3, 4.2)]),
+     r"mem:4: malformed data line: missing key\(s\) 'dphi'"),
+])
+def test_malformed_input_errors(text: str, message: str) -> None:
+    with pytest.raises(RigLogError, match=message):
+        parse_rig_log_text(text, "mem")
+
+
+def test_missing_file(tmp_path: Path) -> None:
+    with pytest.raises(RigLogError, match="cannot read"):
+        parse_rig_log(tmp_path / "none.txt")
+
+
+# -- the shipped logs -----------------------------------------------------------------------
+#: file -> (lines, data lines, runs, skipped counts, camera fix rate [Hz] or None)
+EXPECTED = {
+    "Actually_worked": (28692, 28686, 1, {"terminal": 3, "info": 2, "truncated_final": 1,
+                                          "duplicate_time": 35}, 165.0),
+    "fin": (19977, 19974, 1, {"empty": 2, "truncated_final": 1, "duplicate_time": 33}, 165.0),
+    "friction_v_ref_1": (41450, 41423, 1, {"terminal": 24, "info": 2, "truncated_final": 1,
+                                           "duplicate_time": 17}, None),
+    "sin_wave_001_5_ball_center": (36771, 36764, 1, {"terminal": 3, "info": 3,
+                                                     "truncated_final": 1,
+                                                     "duplicate_time": 19}, None),
+    "step_response_tau_001": (27674, 27626, 6, {"terminal": 30, "info": 17,
+                                                "truncated_final": 1}, None),
+}
+
+
+@needs_data
+@pytest.mark.parametrize("name", sorted(EXPECTED))
+def test_shipped_log(name: str) -> None:
+    n_lines, n_data, n_runs, skipped, cam = EXPECTED[name]
+    log = parse_rig_log(DATA / f"{name}.txt", warn=False)
+    assert (log.n_lines, log.n_data, len(log.runs)) == (n_lines, n_data, n_runs)
+    assert log.skipped == skipped
+    assert len(log.warnings) == 1 and "truncated final line" in log.warnings[0]
+    rec = log.recording()
+    assert np.all(np.diff(rec.t) > 0)
+    mean_rate = (len(rec) - 1) / rec.duration
+    assert 915.0 < mean_rate < 928.0  # the control loop, ~921 Hz
+    assert abs(np.max(np.abs(rec.torque)) - 0.1) < 1e-12 or np.max(np.abs(rec.torque)) < 0.1
+    if cam is None:
+        assert rec.valid_fraction() < 0.001
+    else:
+        assert rec.camera_fix_rate() == pytest.approx(cam, abs=0.5)
+        assert rec.valid_fraction() > 0.95
+        assert rec.meta["camera_backlog_end_t"] is not None
+        assert np.abs(rec.theta[0]) < np.pi  # whole turns rebased
+        assert rec.phi_dot is not None and np.isfinite(rec.phi_dot).mean() > 0.9
+
+
+@needs_data
+def test_step_response_runs_are_full_steps() -> None:
+    log = parse_rig_log(DATA / "step_response_tau_001.txt", warn=False)
+    for run in log.runs:
+        t = run.column("t")
+        assert t[0] == pytest.approx(5.0, abs=0.01) and t[-1] > 9.9
+        assert np.all(run.column("torque") == 0.01)
+        assert np.all(run.column("x") == 0) and np.all(run.column("y") == 0)
+
+
+@needs_data
+def test_fin_phi_estimator_jump_does_not_leak() -> None:
+    """fin.txt logs phi ~0.07 (atan2 only) until the rig's estimator adds theta (~1005)."""
+    log = parse_rig_log(DATA / "fin.txt", warn=False)
+    raw_phi = log.runs[0].column("phi")
+    assert raw_phi[0] < 1.0 and raw_phi[-1] > 1000.0
+    rec = log.recording()
+    v = rec.ball_valid
+    assert np.all(np.abs(np.diff(rec.phi[v])) < 0.2)  # no ~1000 rad jump in our phi
+    assert np.nanmax(np.abs(rec.phi)) < 50.0
