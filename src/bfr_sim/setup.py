@@ -1,0 +1,40 @@
+"""Build description of the ament_python package ``bfr_sim``.
+
+Executables are console scripts installed into ``lib/bfr_sim/`` (see setup.cfg), so
+``ros2 run bfr_sim <executable>`` finds them. Files in ``config/`` and ``launch/`` are
+globbed into ``share/bfr_sim/``: new files there are installed without editing this file.
+"""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = "bfr_sim"
+
+setup(
+    name=package_name,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*"]),
+    data_files=[
+        ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
+        ("share/" + package_name, ["package.xml"]),
+        ("share/" + package_name + "/config", sorted(glob("config/*.yaml"))),
+        ("share/" + package_name + "/launch", sorted(glob("launch/*.py") + glob("launch/*.xml"))),
+        # Keep lib/<package>/ present even before the package registers an executable.
+        ("lib/" + package_name, []),
+    ],
+    install_requires=["setuptools"],
+    zip_safe=True,
+    maintainer="bfr developers",
+    maintainer_email="bfr@example.org",
+    description=(
+        "Physics model, integrators, renderer, recordings I/O, diagnosis core, simulator "
+        "and recorder nodes of the bfr Butterfly robot node suite."
+    ),
+    license="Apache-2.0",
+    entry_points={
+        "console_scripts": [
+            # "<executable> = bfr_sim.<module>:main",  -> lib/bfr_sim/<executable>
+        ],
+    },
+)
