@@ -245,12 +245,35 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--params", type=Path, help="parameter YAML (default: bfr_sim rig.yaml)")
     p.add_argument("--out", type=Path, help="trajectory file: .csv, or .mcap for a ROS 2 bag")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
+    cl = p.add_argument_group(
+        "closed loop (bfr_control)",
+        "With --controller the orbital stabilisation controller closes the loop, seeing only "
+        "the encoder and the camera. The ball starts on the controller's orbit at contact "
+        "angle --phi; --theta, --theta-dot, --phi-dot are offsets from the orbit's state.")
+    cl.add_argument("--controller", action="store_true",
+                    help="close the loop with bfr_control's controller")
+    cl.add_argument("--controller-config", type=Path,
+                    help="controller.yaml (default: bfr_control's)")
+    cl.add_argument("--controller-params", type=Path,
+                    help="the controller's model parameters (default: same as --params)")
+    cl.add_argument("--camera-rate", type=float, default=200.0, help="camera rate [Hz]")
+    cl.add_argument("--camera-latency", type=float, default=0.005,
+                    help="camera delay from exposure to delivery [s]")
+    cl.add_argument("--camera-noise", type=float, default=1e-4,
+                    help="camera position noise per axis [m]")
+    cl.add_argument("--control-rate", type=float,
+                    help="control rate [Hz] (default: controller.yaml's)")
+    cl.add_argument("--seed", type=int, default=0, help="seed of the sensor noise")
     return p
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``bfr simulate``; returns the process exit code."""
     args = build_parser().parse_args(argv)
+    if args.controller:
+        from bfr_control.closed_loop import simulate_with_controller  # noqa: PLC0415
+
+        return simulate_with_controller(args)
     try:
         params: RigParams = load_params(args.params)
         model = RigidModel(params)

@@ -1,0 +1,410 @@
+"""The orbital stabilisation controller of the Butterfly robot (pure numpy, no rclpy).
+
+Per control step (``OrbitalController.step``), from the encoder's theta, theta_dot and the
+latest camera fix:
+
+1. estimate phi, phi_dot at the present (bfr_control.estimator: Kalman filter with exact
+   latency compensation);
+2. transverse coordinates ``I = phi_dot^2 - Y(phi)``, ``y = theta - Theta(phi)``,
+   ``y_dot = theta_dot - Theta'(phi) phi_dot`` (bfr_control.transverse);
+3. ``w = K(phi) [I, y, y_dot]`` with the periodic Riccati gains (bfr_control.riccati);
+4. ``u = PFL(w)``, the torque that makes ``y_ddot = w`` on the controller's model (seed
+   eq. 4.46), plus an optional friction feed-forward ``c_v theta_dot + T_c tanh(theta_dot /
+   v_s)``, clamped to +-torque_limit (the unclamped value is reported).
+
+A supervisor (state machine) decides whether to apply it:
+
+- ``WAITING``: no usable ball yet (fewer than ``acquire_frames`` valid fixes, or the ball is
+  not rolling forward near the orbit): torque 0;
+- ``ROLLING``: the law above;
+- ``BALL_LOST`` (latched until :meth:`OrbitalController.reset`): no valid fix for longer than
+  ``lost_timeout``, the ball stopped or turned back (phi_dot estimate below
+  ``min_phi_dot``), or the state far from the orbit (``|y| > max_abs_y`` or
+  ``|z| > max_abs_z``): torque 0, with the reason.
+
+Configuration: ``config/controller.yaml`` (ROS 2 parameter-file format, also the controller
+node's parameter file), loaded by :func:`load_controller_config`. The physics comes from the
+controller's own :class:`bfr_sim.params.RigParams` (its nominal model), separate from the
+plant's.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+from bfr_sim.dynamics import RigidModel
+from bfr_sim.params import RigParams
+
+from bfr_control.constraint import ConstraintSpec, VirtualConstraint
+from bfr_control.estimator import BallEstimator, BallObservation, EstimatorConfig
+from bfr_control.orbit import OrbitSpec, PeriodicOrbit
+from bfr_control.periodic import PeriodicTable
+from bfr_control.riccati import GainTable, RiccatiWeights, compute_gains
+from bfr_control.transverse import pfl_kernel
+
+__all__ = [
+    "BALL_LOST",
+    "ROLLING",
+    "WAITING",
+    "Command",
+    "ControlConfig",
+    "ControllerConfig",
+    "OrbitalController",
+    "SupervisorConfig",
+    "default_config_path",
+    "load_controller_config",
+]
+
+WAITING = "WAITING"
+ROLLING = "ROLLING"
+BALL_LOST = "BALL_LOST"
+
+
+@dataclass(frozen=True)
+class ControlConfig:
+    """Control-law settings.
+
+    Attributes
+    ----------
+    rate : float
+        Control rate [Hz] (the closed-loop harness's default).
+    torque_limit : float
+        Clamp on the commanded torque [N m].
+    friction_viscous : float
+        Feed-forward viscous coefficient c_v [N m s/rad].
+    friction_coulomb : float
+        Feed-forward Coulomb torque T_c [N m].
+    friction_smoothing : float
+        v_s of ``tanh(theta_dot / v_s)`` [rad/s].
+    """
+
+    rate: float = 1000.0
+    torque_limit: float = 0.1
+    friction_viscous: float = 0.0
+    friction_coulomb: float = 0.0
+    friction_smoothing: float = 0.05
+
+    def __post_init__(self) -> None:
+        for name in ("rate", "torque_limit", "friction_smoothing"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"control.{name} must be > 0, got {v}")
+        for name in ("friction_viscous", "friction_coulomb"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0.0):
+                raise ValueError(f"control.{name} must be >= 0, got {v}")
+
+
+@dataclass(frozen=True)
+class SupervisorConfig:
+    """State-machine thresholds.
+
+    Attributes
+    ----------
+    acquire_frames : int
+        Valid fixes needed before rolling control starts [-].
+    lost_timeout : float
+        Longest time without a valid fix while rolling [s].
+    min_phi_dot : float
+        Smallest phi_dot estimate accepted while rolling [rad/s].
+    max_abs_y : float
+        Largest |y| = |theta - Theta(phi)| accepted [rad].
+    max_abs_z : float
+        Largest |phi_dot - phi_dot*(phi)| accepted [rad/s].
+    """
+
+    acquire_frames: int = 4
+    lost_timeout: float = 0.1
+    min_phi_dot: float = 0.3
+    max_abs_y: float = 0.6
+    max_abs_z: float = 2.0
+
+    def __post_init__(self) -> None:
+        if int(self.acquire_frames) != self.acquire_frames or self.acquire_frames < 1:
+            raise ValueError("supervisor.acquire_frames must be an integer >= 1")
+        for name in ("lost_timeout", "min_phi_dot", "max_abs_y", "max_abs_z"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"supervisor.{name} must be > 0, got {v}")
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Everything in controller.yaml."""
+
+    constraint: ConstraintSpec = field(default_factory=ConstraintSpec)
+    orbit: OrbitSpec = field(default_factory=OrbitSpec)
+    riccati: RiccatiWeights = field(default_factory=RiccatiWeights)
+    control: ControlConfig = field(default_factory=ControlConfig)
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    supervisor: SupervisorConfig = field(default_factory=SupervisorConfig)
+
+    @classmethod
+    def from_dict(cls, d: Mapping[str, Any]) -> ControllerConfig:
+        """Build from the ``ros__parameters`` mapping of controller.yaml."""
+        known = {"constraint", "orbit", "riccati", "control", "estimator", "supervisor"}
+        unknown = set(d) - known
+        if unknown:
+            raise ValueError(f"controller config: unknown groups {sorted(unknown)}")
+
+        def build(kind: type, name: str) -> Any:
+            g = dict(d.get(name, {}) or {})
+            names = set(kind.__dataclass_fields__)
+            bad = set(g) - names
+            if bad:
+                raise ValueError(f"controller config: unknown entries {sorted(bad)} in {name}")
+            for key, f in kind.__dataclass_fields__.items():
+                if key in g and isinstance(f.default, float) and isinstance(g[key], (int, str)):
+                    g[key] = float(g[key])  # YAML 1.1 reads 1e4 as a string, 2 as an int
+            return kind(**g)
+
+        orbit = dict(d.get("orbit", {}) or {})
+        # a ROS parameter cannot be None: a non-positive speed means "not used"
+        for key in ("mean_phi_dot", "phi_dot_0"):
+            if key in orbit and orbit[key] is not None and float(orbit[key]) <= 0.0:
+                orbit[key] = None
+        if orbit.get("phi_dot_0") is not None and "mean_phi_dot" not in orbit:
+            orbit["mean_phi_dot"] = None
+        bad = set(orbit) - set(OrbitSpec.__dataclass_fields__)
+        if bad:
+            raise ValueError(f"controller config: unknown entries {sorted(bad)} in orbit")
+        return cls(constraint=ConstraintSpec.from_dict(dict(d.get("constraint", {}) or {})),
+                   orbit=OrbitSpec(**orbit),
+                   riccati=build(RiccatiWeights, "riccati"),
+                   control=build(ControlConfig, "control"),
+                   estimator=build(EstimatorConfig, "estimator"),
+                   supervisor=build(SupervisorConfig, "supervisor"))
+
+    def replace(self, **groups: Any) -> ControllerConfig:
+        """Copy with some groups changed, e.g. ``replace(control=ControlConfig(rate=200))``."""
+        d = {name: getattr(self, name) for name in self.__dataclass_fields__}
+        d.update(groups)
+        return ControllerConfig(**d)
+
+
+def default_config_path() -> Path:
+    """Path of the shipped controller.yaml (installed share folder or source tree)."""
+    here = Path(__file__).resolve().parent
+    candidates = [here.parent / "config" / "controller.yaml"]
+    try:
+        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
+
+        candidates.append(Path(get_package_share_directory("bfr_control")) / "config"
+                          / "controller.yaml")
+    except Exception:  # noqa: BLE001 (not installed as an ament package)
+        pass
+    for c in candidates:
+        if c.is_file():
+            return c
+    raise FileNotFoundError(f"controller.yaml not found; looked in {[str(c) for c in candidates]}")
+
+
+def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
+    """Load controller.yaml (ROS 2 parameter-file format; default: the shipped file)."""
+    p = Path(path) if path is not None else default_config_path()
+    try:
+        doc = yaml.safe_load(p.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ValueError(f"cannot read controller config {p}: {exc}") from exc
+    if not isinstance(doc, Mapping):
+        raise ValueError(f"{p}: not a ROS 2 parameter file")
+    body = doc.get("ros__parameters")
+    if body is None:
+        for v in doc.values():
+            if isinstance(v, Mapping) and "ros__parameters" in v:
+                body = v["ros__parameters"]
+                break
+    if not isinstance(body, Mapping):
+        raise ValueError(f"{p}: no ros__parameters section")
+    try:
+        return ControllerConfig.from_dict(body)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{p}: {exc}") from exc
+
+
+@dataclass(slots=True)
+class Command:
+    """Output of one control step.
+
+    Attributes
+    ----------
+    t : float
+        Time of the step [s].
+    torque : float
+        Commanded (clamped) torque [N m].
+    torque_unsat : float
+        Torque before the clamp [N m] (0 when not rolling).
+    mode : str
+        WAITING, ROLLING or BALL_LOST.
+    reason : str
+        Why the supervisor is in this mode (empty while rolling normally).
+    phi, phi_dot : float
+        Estimated contact angle [rad] and rate [rad/s] (NaN before the first fix).
+    I, y, y_dot, z : float
+        Transverse coordinates from the estimate [rad^2/s^2, rad, rad/s, rad/s].
+    w : float
+        Commanded y_ddot [rad/s^2].
+    new_fix : bool
+        A valid camera fix was fused in this step.
+    """
+
+    t: float
+    torque: float
+    torque_unsat: float
+    mode: str
+    reason: str
+    phi: float
+    phi_dot: float
+    I: float  # noqa: E741 (the integral-of-motion deviation of the literature)
+    y: float
+    y_dot: float
+    z: float
+    w: float
+    new_fix: bool
+
+
+class OrbitalController:
+    """Virtual-constraint orbital stabilisation with a supervisor (module docstring).
+
+    Parameters
+    ----------
+    params : RigParams
+        The controller's model of the rig (nominal; the plant may differ).
+    config : ControllerConfig, optional
+        Settings (default: the shipped controller.yaml).
+    use_cache : bool
+        Use the gain cache (bfr_control.riccati).
+    gains : GainTable, optional
+        Precomputed gains (skips the Riccati solve; must belong to the same orbit).
+    """
+
+    def __init__(self, params: RigParams, config: ControllerConfig | None = None,
+                 use_cache: bool = True, gains: GainTable | None = None) -> None:
+        self.params = params
+        self.config = config if config is not None else load_controller_config()
+        self.model = RigidModel(params)
+        self.constraint = VirtualConstraint(self.model, self.config.constraint)
+        self.orbit = PeriodicOrbit(self.model, self.constraint, self.config.orbit)
+        self.gains = gains if gains is not None else compute_gains(
+            self.orbit, self.config.riccati, use_cache=use_cache)
+        self.estimator = BallEstimator(self.model, self.orbit, self.config.estimator)
+        self._args = self.model.kernel_args
+        # one table for the loop: Theta, Theta', Theta'', Y, k_I, k_y, k_ydot
+        o = self.orbit
+        nan = np.full((o.phi.size, 3), np.nan)
+        self._tab = PeriodicTable(
+            o.period, np.column_stack([o.table.values, self.gains.table.values]),
+            derivatives=np.column_stack([o.table.derivatives, nan]),
+            drift=[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
+        self.reset()
+
+    def reset(self) -> None:
+        """Back to WAITING with a fresh estimator."""
+        self.estimator.reset()
+        self.mode = WAITING
+        self.reason = "no ball observation yet"
+        self.lost_at: float | None = None
+
+    def _lose(self, t: float, reason: str) -> None:
+        self.mode = BALL_LOST
+        self.reason = reason
+        self.lost_at = t
+
+    def step(self, t: float, theta: float, theta_dot: float,
+             ball: BallObservation | Iterable[BallObservation] | None = None) -> Command:
+        """One control step.
+
+        Parameters
+        ----------
+        t : float
+            Time of the encoder sample [s].
+        theta, theta_dot : float
+            Encoder frame angle [rad] and rate [rad/s].
+        ball : BallObservation or iterable of them or None
+            Camera fixes that arrived since the last step (None: none).
+
+        Returns
+        -------
+        Command
+        """
+        est = self.estimator
+        sup = self.config.supervisor
+        ctl = self.config.control
+        if not (math.isfinite(t) and math.isfinite(theta) and math.isfinite(theta_dot)):
+            if self.mode == ROLLING:
+                self._lose(t, "non-finite encoder sample")
+            return Command(t, 0.0, 0.0, self.mode, self.reason, est.phi, est.phi_dot,
+                           math.nan, math.nan, math.nan, math.nan, 0.0, False)
+        est.record(t, theta, theta_dot)
+        new_fix = False
+        if ball is not None:
+            for obs in (ball,) if isinstance(ball, BallObservation) else ball:
+                if est.update(obs):
+                    new_fix = True
+        phi, phi_dot = est.phi, est.phi_dot
+        if not est.initialized:
+            return Command(t, 0.0, 0.0, self.mode, self.reason, phi, phi_dot,
+                           math.nan, math.nan, math.nan, math.nan, 0.0, new_fix)
+        th0, th1, th2, Y, k_i, k_y, k_yd = self._tab(phi).tolist()
+        y = theta - th0
+        y_dot = theta_dot - th1 * phi_dot
+        I_dev = phi_dot * phi_dot - Y
+        z = phi_dot - math.sqrt(Y)
+        since_fix = t - est.last_fix_t
+        if self.mode == WAITING:
+            if since_fix > sup.lost_timeout:
+                est.reset()  # the ball went away before we locked on
+                self.reason = "ball seen, then lost again before acquisition"
+                return Command(t, 0.0, 0.0, self.mode, self.reason, math.nan, math.nan,
+                               math.nan, math.nan, math.nan, math.nan, 0.0, new_fix)
+            if est.frames < sup.acquire_frames:
+                self.reason = f"acquiring the ball ({est.frames}/{sup.acquire_frames} fixes)"
+            elif phi_dot < sup.min_phi_dot or abs(y) > sup.max_abs_y or abs(z) > sup.max_abs_z:
+                self.reason = (f"ball seen but not near the orbit (phi_dot {phi_dot:.3g} rad/s, "
+                               f"y {y:.3g} rad, z {z:.3g} rad/s)")
+            else:
+                self.mode = ROLLING
+                self.reason = ""
+        elif self.mode == ROLLING:
+            if since_fix > sup.lost_timeout:
+                self._lose(t, f"no valid ball fix for {since_fix:.3f} s "
+                              f"(timeout {sup.lost_timeout} s)")
+            elif phi_dot < sup.min_phi_dot:
+                self._lose(t, f"ball stopped or turned back (phi_dot estimate {phi_dot:.3g} "
+                              f"rad/s < {sup.min_phi_dot} rad/s)")
+            elif abs(y) > sup.max_abs_y:
+                self._lose(t, f"frame {y:.3g} rad off the constraint (max {sup.max_abs_y} rad)")
+            elif abs(z) > sup.max_abs_z:
+                self._lose(t, f"ball speed {z:.3g} rad/s off the orbit "
+                              f"(max {sup.max_abs_z} rad/s)")
+        if self.mode != ROLLING:
+            return Command(t, 0.0, 0.0, self.mode, self.reason, phi, phi_dot, I_dev, y, y_dot,
+                           z, 0.0, new_fix)
+        w = k_i * I_dev + k_y * y + k_yd * y_dot
+        u = pfl_kernel(theta, phi, theta_dot, phi_dot, th1, th2, w, *self._args)
+        if ctl.friction_viscous or ctl.friction_coulomb:
+            u += (ctl.friction_viscous * theta_dot
+                  + ctl.friction_coulomb * math.tanh(theta_dot / ctl.friction_smoothing))
+        lim = ctl.torque_limit
+        u_sat = lim if u > lim else (-lim if u < -lim else u)
+        return Command(t, u_sat, u, self.mode, self.reason, phi, phi_dot, I_dev, y, y_dot, z, w,
+                       new_fix)
+
+    def orbit_state(self, phi: float) -> np.ndarray:
+        """State ``[theta, phi, theta_dot, phi_dot]`` on the controller's orbit at phi."""
+        return self.orbit.state(phi)
+
+    def summary(self) -> dict:
+        """Orbit and gain figures (JSON-ready)."""
+        return {"orbit": self.orbit.summary(),
+                "gains": {**self.gains.ranges(),
+                          "monodromy_spectral_radius":
+                              self.gains.info.get("monodromy_spectral_radius"),
+                          "riccati_periods": self.gains.info.get("periods"),
+                          "cache": self.gains.info.get("cache")}}

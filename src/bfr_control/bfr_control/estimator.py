@@ -1,0 +1,309 @@
+"""Ball-state estimator: contact angle phi and its rate from late, noisy camera fixes.
+
+What the rig gives the controller: the frame angle theta and rate theta_dot from the encoder
+at every control step, and now and then a camera fix of the ball centre, world ``(x, y)``
+[m], stamped with its exposure time and a validity flag, some milliseconds late.
+
+Measurement. The ball-centre angle, clockwise from the frame's +y axis (the rig's logged
+``phi``), is ``psi = theta(t_exp) + atan2(x, y)`` (world = Rot(theta) frame, DEVELOPERS.md), with
+theta at the exposure time interpolated from the encoder history (cubic Hermite in theta,
+theta_dot). The contact angle is ``phi = phi_of_psi(psi)``, the inverse of
+``bfr_sim.geometry.OffsetCurve.ball_angle``, tabulated once. Its noise, for a camera noise
+sigma [m] per axis, is ``sigma / |p(phi)| * dphi/dpsi`` [rad].
+
+Process model. The passive row of the model, ``M21 theta_ddot + M22 phi_ddot + c2 + G2 = Q2``,
+gives ``phi_ddot`` from the *measured* frame motion (theta, theta_dot, and theta_ddot as the
+encoder rate's difference over the control step), so the prediction does not depend on the
+frame inertia, the motor gain or the joint friction:
+
+    phi_ddot = (Q2 - M21 theta_ddot - c2 - G2) / M22,
+    c2 = -1/2 M11' theta_dot^2 + 1/2 M22' phi_dot^2,
+    Q2 = -mu_rol lam tanh(phi_dot / v_r) F_n(theta_ddot)          (0 in the nominal model).
+
+It is integrated per control step with one evaluation at the step's midpoint
+(``phi += phi_dot h + a h^2 / 2``, ``phi_dot += a h``).
+
+Filter. A Kalman filter on ``[phi, phi_dot]`` (constant-acceleration noise of density q
+around the model's phi_ddot; measurement ``H = [1, 0]``). Latency is handled exactly rather
+than by a delay model: the filter's estimate is kept at the time of the last fix; a new fix
+with exposure time t_e is fused after propagating that estimate to t_e through the recorded
+encoder history, and the result is propagated on to the present. Missing, invalid (NaN,
+``valid = False``), stale (not newer than the last fix) or future-stamped fixes are
+ignored: the estimate then simply runs on the model.
+"""
+
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from bfr_sim._jit import njit
+from bfr_sim.dynamics import RigidModel, rigid_terms
+from bfr_sim.geometry import offset_kernel
+
+from bfr_control.orbit import PeriodicOrbit
+from bfr_control.periodic import PeriodicTable
+
+__all__ = ["BallEstimator", "BallObservation", "EstimatorConfig", "passive_phi_ddot"]
+
+
+@dataclass(frozen=True, slots=True)
+class BallObservation:
+    """One camera fix of the ball centre.
+
+    Attributes
+    ----------
+    t : float
+        Exposure time [s] (the controller's clock).
+    x, y : float
+        Ball centre in the world frame [m] (rig: 0, 0 when no ball is seen).
+    valid : bool
+        The detector found the ball.
+    """
+
+    t: float
+    x: float
+    y: float
+    valid: bool = True
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Estimator settings.
+
+    Attributes
+    ----------
+    camera_noise : float
+        Standard deviation of the camera's ball position, per axis [m].
+    accel_noise : float
+        Density q of the white acceleration noise around the model's phi_ddot
+        [rad/s^2/sqrt(Hz)] (covers model errors and the encoder rate's noise).
+    phi_dot_sigma0 : float
+        Standard deviation of the initial phi_dot guess [rad/s].
+    history : float
+        Encoder history kept for latency compensation [s].
+    """
+
+    camera_noise: float = 1.0e-4
+    accel_noise: float = 0.5
+    phi_dot_sigma0: float = 1.0
+    history: float = 0.5
+
+    def __post_init__(self) -> None:
+        for name in ("camera_noise", "accel_noise", "phi_dot_sigma0", "history"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0.0):
+                raise ValueError(f"estimator.{name} must be > 0, got {v}")
+
+
+@njit
+def passive_phi_ddot(theta: float, phi: float, theta_dot: float, phi_dot: float,
+                     theta_ddot: float, P: np.ndarray, R: float, rho0: float,
+                     orders: np.ndarray, ccos: np.ndarray, csin: np.ndarray, bphi: np.ndarray,
+                     bh: np.ndarray, bw: np.ndarray) -> float:
+    """phi_ddot from the passive row given the frame's acceleration (module docstring).
+
+    Every ``(theta_ddot, phi_ddot)`` the model produces at one state, whatever the torque,
+    lies on the line of the passive row; the model's accelerations at u = 0 and u = 1 give
+    two points of it, so the row is used exactly as the model writes it (friction, rolling
+    resistance and any perturbation included) without repeating its equations here.
+    """
+    a0 = rigid_terms(theta, phi, theta_dot, phi_dot, 0.0, P, R, rho0, orders, ccos, csin,
+                     bphi, bh, bw)
+    a1 = rigid_terms(theta, phi, theta_dot, phi_dot, 1.0, P, R, rho0, orders, ccos, csin,
+                     bphi, bh, bw)
+    return a0[1] + (theta_ddot - a0[0]) * (a1[1] - a0[1]) / (a1[0] - a0[0])
+
+
+class BallEstimator:
+    """Kalman filter on ``[phi, phi_dot]`` with exact latency compensation (module docstring).
+
+    Parameters
+    ----------
+    model : RigidModel
+        The controller's model (geometry and ball parameters).
+    orbit : PeriodicOrbit
+        The orbit: its speed is the initial phi_dot guess.
+    config : EstimatorConfig
+        Settings.
+    """
+
+    def __init__(self, model: RigidModel, orbit: PeriodicOrbit, config: EstimatorConfig
+                 ) -> None:
+        self.model = model
+        self.orbit = orbit
+        self.config = config
+        self._args = model.kernel_args
+        # psi -> phi table: phi - psi as a function of psi (period of the track)
+        period = orbit.period
+        n = 2048
+        psi = np.arange(n) * (period / n)
+        phi = model.curve.phi_from_ball_angle(psi)
+        g = offset_kernel(phi, *model.geom_args)
+        px, py, p1x, p1y = g[0], g[1], g[2], g[3]
+        dpsi_dphi = (py * p1x - px * p1y) / (px * px + py * py)
+        dphi_dpsi = 1.0 / dpsi_dphi
+        # measurement noise of phi per unit camera noise: dphi/dpsi / |p|
+        gain = dphi_dpsi / np.hypot(px, py)
+        self._inv = PeriodicTable(period, np.column_stack([phi - psi, gain]),
+                                  derivatives=None, names=("phi_minus_psi", "noise_gain"))
+        self.q = config.accel_noise ** 2
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget everything (no fix yet)."""
+        self.initialized = False
+        self.frames = 0  # valid fixes fused since initialisation
+        self.last_fix_t = -math.inf  # exposure time of the last valid fix
+        self.last_seen_t = -math.inf  # exposure time of the last fix of any kind
+        self._ts: list[float] = []
+        self._th: list[float] = []
+        self._thd: list[float] = []
+        # estimate at the present (last recorded time)
+        self.phi = math.nan
+        self.phi_dot = math.nan
+        self._a = 0.0
+        # estimate and covariance at the last fix
+        self._m = (math.nan, math.nan, 0.0)
+        self._cov = (0.0, 0.0, 0.0)
+        self.last_innovation = math.nan
+
+    # -- helpers ---------------------------------------------------------------------------
+    def phi_of_psi(self, psi: float) -> float:
+        """Contact angle of a ball-centre angle [rad] (table inverse of ball_angle)."""
+        return psi + float(self._inv(psi)[0])
+
+    def _theta_at(self, t: float) -> float | None:
+        """Encoder theta at time t by cubic Hermite interpolation, or None if not covered."""
+        ts = self._ts
+        if not ts or t < ts[0] or t > ts[-1]:
+            return None
+        i = bisect.bisect_right(ts, t) - 1
+        if i >= len(ts) - 1:
+            return self._th[-1]
+        h = ts[i + 1] - ts[i]
+        s = (t - ts[i]) / h
+        s2 = s * s
+        s3 = s2 * s
+        return ((2 * s3 - 3 * s2 + 1) * self._th[i] + (s3 - 2 * s2 + s) * h * self._thd[i]
+                + (-2 * s3 + 3 * s2) * self._th[i + 1] + (s3 - s2) * h * self._thd[i + 1])
+
+    def _accel(self, theta: float, phi: float, theta_dot: float, phi_dot: float,
+               theta_ddot: float) -> float:
+        return passive_phi_ddot(theta, phi, theta_dot, phi_dot, theta_ddot, *self._args)
+
+    def _propagate(self, phi: float, phi_dot: float, a: float, t0: float, t1: float
+                   ) -> tuple[float, float, float]:
+        """Propagate ``(phi, phi_dot)`` from t0 to t1 through the encoder history."""
+        ts, th, thd = self._ts, self._th, self._thd
+        if t1 <= t0:
+            return phi, phi_dot, a
+        i = max(bisect.bisect_right(ts, t0) - 1, 0)
+        t = t0
+        while t < t1 - 1e-12 and i < len(ts) - 1:
+            ta, tb = ts[i], ts[i + 1]
+            if tb <= t:
+                i += 1
+                continue
+            seg_end = min(tb, t1)
+            h = seg_end - t
+            acc = (thd[i + 1] - thd[i]) / (tb - ta)
+            tm = t + 0.5 * h - ta
+            th_m = th[i] + thd[i] * tm + 0.5 * acc * tm * tm
+            thd_m = thd[i] + acc * tm
+            a = self._accel(th_m, phi + 0.5 * h * phi_dot, thd_m, phi_dot + 0.5 * h * a, acc)
+            phi = phi + h * phi_dot + 0.5 * h * h * a
+            phi_dot = phi_dot + h * a
+            t = seg_end
+            i += 1
+        return phi, phi_dot, a
+
+    # -- interface -------------------------------------------------------------------------
+    def record(self, t: float, theta: float, theta_dot: float) -> None:
+        """Add an encoder sample and advance the present estimate to t."""
+        ts = self._ts
+        if ts and t <= ts[-1]:
+            return  # repeated or out-of-order sample: ignore
+        t_prev = ts[-1] if ts else None
+        ts.append(t)
+        self._th.append(theta)
+        self._thd.append(theta_dot)
+        if len(ts) > 64 and t - ts[0] > 2.0 * self.config.history:
+            k = bisect.bisect_left(ts, t - self.config.history)
+            del ts[:k]
+            del self._th[:k]
+            del self._thd[:k]
+        if self.initialized and t_prev is not None:
+            # one step of the propagation of _propagate, over [t_prev, t]
+            th_p, thd_p = self._th[-2], self._thd[-2]
+            h = t - t_prev
+            acc = (theta_dot - thd_p) / h
+            tm = 0.5 * h
+            phi, phi_dot = self.phi, self.phi_dot
+            a = passive_phi_ddot(th_p + thd_p * tm + 0.5 * acc * tm * tm, phi + tm * phi_dot,
+                                 thd_p + acc * tm, phi_dot + tm * self._a, acc, *self._args)
+            self.phi = phi + h * phi_dot + 0.5 * h * h * a
+            self.phi_dot = phi_dot + h * a
+            self._a = a
+
+    def update(self, obs: BallObservation) -> bool:
+        """Fuse one camera fix; returns True when it was valid and used."""
+        t_e = float(obs.t)
+        if not math.isfinite(t_e) or t_e <= self.last_seen_t:
+            return False  # stale or repeated frame
+        self.last_seen_t = t_e
+        x, y = float(obs.x), float(obs.y)
+        if not (obs.valid and math.isfinite(x) and math.isfinite(y)) or (x == 0.0 and y == 0.0):
+            return False
+        theta_e = self._theta_at(t_e)
+        if theta_e is None:
+            return False  # exposure outside the encoder history (future or too old)
+        psi = theta_e + math.atan2(x, y)
+        t_now = self._ts[-1]
+        noise_gain = float(self._inv(psi)[1])
+        r = (self.config.camera_noise * noise_gain) ** 2
+        if not self.initialized:
+            # first fix: phi from the measurement, phi_dot from the orbit's speed there
+            phi_m = self.phi_of_psi(psi)
+            pd = float(math.sqrt(self.orbit.table(phi_m)[3]))
+            self._m = (phi_m, pd, 0.0)
+            self._cov = (r, 0.0, self.config.phi_dot_sigma0 ** 2)
+            self._t_m = t_e
+            self.initialized = True
+            self.frames = 1
+            self.last_fix_t = t_e
+            self.phi, self.phi_dot, self._a = self._propagate(phi_m, pd, 0.0, t_e, t_now)
+            return True
+        # propagate the estimate at the last fix to this exposure
+        phi_p, pd_p, a_p = self._propagate(*self._m, self._t_m, t_e)
+        dt = t_e - self._t_m
+        p11, p12, p22 = self._cov
+        q = self.q
+        p11 = p11 + 2.0 * dt * p12 + dt * dt * p22 + q * dt ** 3 / 3.0
+        p12 = p12 + dt * p22 + q * dt * dt / 2.0
+        p22 = p22 + q * dt
+        # measurement, unwrapped next to the prediction
+        psi_pred = phi_p - float(self._inv(phi_p)[0])  # approx. ball angle of phi_p
+        psi = psi_pred + (psi - psi_pred + math.pi) % (2.0 * math.pi) - math.pi
+        phi_meas = self.phi_of_psi(psi)
+        nu = phi_meas - phi_p
+        s = p11 + r
+        k1 = p11 / s
+        k2 = p12 / s
+        phi_u = phi_p + k1 * nu
+        pd_u = pd_p + k2 * nu
+        self._cov = ((1.0 - k1) * p11, (1.0 - k1) * p12, p22 - k2 * p12)
+        self._m = (phi_u, pd_u, a_p)
+        self._t_m = t_e
+        self.frames += 1
+        self.last_fix_t = t_e
+        self.last_innovation = nu
+        self.phi, self.phi_dot, self._a = self._propagate(phi_u, pd_u, a_p, t_e, t_now)
+        return True
+
+    @property
+    def covariance(self) -> tuple[float, float, float]:
+        """``(P_phiphi, P_phiphidot, P_phidotphidot)`` at the last fix."""
+        return self._cov
