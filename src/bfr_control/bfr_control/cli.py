@@ -39,6 +39,7 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
         "main",
         "controller's region of attraction and robustness figures (closed-loop simulation)",
     ),
+    "camera-eval": ("bfr_camera.evaluate", "main", "ball detector: accuracy and speed figures"),
 }
 
 
