@@ -40,6 +40,11 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
         "controller's region of attraction and robustness figures (closed-loop simulation)",
     ),
     "camera-eval": ("bfr_camera.evaluate", "main", "ball detector: accuracy and speed figures"),
+    "analyze": (
+        "bfr_sim.analysis.cli",
+        "main",
+        "the seed's perturbation study: energy (ch. 2) and bounce/slip (ch. 3-4) figures",
+    ),
 }
 
 

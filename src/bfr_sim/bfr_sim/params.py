@@ -21,15 +21,16 @@ from typing import Any
 import yaml
 
 __all__ = [
-    "ParameterError",
-    "BallParams",
-    "ContourParams",
-    "FrameParams",
-    "EnvironmentParams",
-    "JointParams",
     "ActuatorParams",
-    "TrackParams",
+    "BallParams",
+    "ContactParams",
+    "ContourParams",
+    "EnvironmentParams",
+    "FrameParams",
+    "JointParams",
+    "ParameterError",
     "RigParams",
+    "TrackParams",
     "default_params_path",
     "load_params",
     "params_from_dict",
@@ -75,12 +76,21 @@ class BallParams:
         R_b [m], the ball's own radius.
     plate_distance : float
         d_f [m], the distance between the two plates the ball rolls on.
+    ellipticity : float
+        [m] peak-to-peak variation of the ball's contact radius (an elliptic ball, seed
+        section 2.1.3): the ball centre stands ``R + (ellipticity / 2) cos 2 beta`` off the
+        track, beta the contact direction in ball-fixed coordinates (0 = round ball).
+    ellipse_phase : float
+        [rad] beta at arc length s = 0 of the ball-centre curve, relative to the normal's
+        angle (the ball's orientation when the rigid model's arc length starts).
     """
 
     mass: float = 3.00e-3
     inertia: float = 5.48e-7
     radius: float = 16.6e-3
     plate_distance: float = 25.5e-3
+    ellipticity: float = 0.0
+    ellipse_phase: float = 0.0
 
     def __post_init__(self) -> None:
         _positive("ball.mass", self.mass)
@@ -90,6 +100,10 @@ class BallParams:
         _check(self.plate_distance < 2.0 * self.radius, "ball.plate_distance",
                f"{self.plate_distance} m must be smaller than the ball's diameter "
                f"{2 * self.radius} m, or the ball falls through the groove")
+        _nonnegative("ball.ellipticity", self.ellipticity)
+        _check(self.ellipticity < self.rolling_radius, "ball.ellipticity",
+               f"{self.ellipticity} m must stay below the rolling radius")
+        _finite("ball.ellipse_phase", self.ellipse_phase)
 
     @property
     def rolling_radius(self) -> float:
@@ -131,15 +145,24 @@ class ContourParams:
 
 @dataclass(frozen=True)
 class FrameParams:
-    """The rotating frame: inertia J_f [kg m^2] (with rotor), mass m_f [kg], contour."""
+    """The rotating frame: inertia J_f [kg m^2] (with rotor), mass m_f [kg], contour.
+
+    ``wobble`` [rad] tilts the frame's plane about the frame's own y axis, so that the plane
+    is not perpendicular to the shaft: a frame point ``(x, y)`` sits at ``(x cos w, y,
+    x sin w)`` in the shaft's coordinates and the ball sways along z by ``x sin w`` (the
+    seed's eqs. 2.7-2.9). A pitched shaft is ``environment.axis_misalignment`` instead.
+    """
 
     inertia: float = 1.58e-3
     mass: float = 0.1
     contour: ContourParams = field(default_factory=ContourParams)
+    wobble: float = 0.0
 
     def __post_init__(self) -> None:
         _positive("frame.inertia", self.inertia)
         _nonnegative("frame.mass", self.mass)
+        _finite("frame.wobble", self.wobble)
+        _check(abs(self.wobble) < math.pi / 4, "frame.wobble", "must be within (-pi/4, pi/4)")
 
 
 @dataclass(frozen=True)
@@ -169,17 +192,22 @@ class JointParams:
     """Friction in the frame's bearing.
 
     Torque on the frame: ``-viscous_friction * theta_dot
-    - coulomb_friction * tanh(theta_dot / coulomb_smoothing)``, in [N m s/rad], [N m], [rad/s].
+    - (coulomb_friction + load_friction * F_load) * tanh(theta_dot / coulomb_smoothing)``, in
+    [N m s/rad], [N m], [m], [rad/s]. ``F_load`` [N] is the bearing load, the magnitude of the
+    ball's contact force on the frame plus the frame's weight (seed section 2.2:
+    ``T_joint = 1e-5 F_load``, a rolling bearing of bore 0.01 m).
     """
 
     viscous_friction: float = 0.0
     coulomb_friction: float = 0.0
     coulomb_smoothing: float = 1.0e-3
+    load_friction: float = 0.0
 
     def __post_init__(self) -> None:
         _nonnegative("joint.viscous_friction", self.viscous_friction)
         _nonnegative("joint.coulomb_friction", self.coulomb_friction)
         _positive("joint.coulomb_smoothing", self.coulomb_smoothing)
+        _nonnegative("joint.load_friction", self.load_friction)
 
 
 @dataclass(frozen=True)
@@ -207,7 +235,12 @@ class TrackParams:
     bump_phi, bump_height, bump_width : tuple of float
         Gaussian bumps added to the contour radius:
         ``rho += h exp(-d^2 / (2 w^2))`` with d the wrapped angle distance to ``bump_phi``
-        [rad], ``h = bump_height`` [m], ``w = bump_width`` [rad].
+        [rad], ``h = bump_height`` [m], ``w = bump_width`` [rad]. Both models see them; the
+        rigid model needs them gentle (no cusp of the ball-centre curve).
+    asperity_phi, asperity_height, asperity_width : tuple of float
+        Sharp bumps of the same form (single bumps, a row, a rough surface drawn by
+        :func:`bfr_sim.perturbations.rough_track`) that only the contact model
+        (:mod:`bfr_sim.contact`) resolves; the rigid model leaves them out.
     """
 
     rolling_resistance: float = 0.0
@@ -215,6 +248,9 @@ class TrackParams:
     bump_phi: tuple[float, ...] = ()
     bump_height: tuple[float, ...] = ()
     bump_width: tuple[float, ...] = ()
+    asperity_phi: tuple[float, ...] = ()
+    asperity_height: tuple[float, ...] = ()
+    asperity_width: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         _nonnegative("track.rolling_resistance", self.rolling_resistance)
@@ -228,6 +264,98 @@ class TrackParams:
             _finite("track.bump_height", v)
         for v in self.bump_width:
             _positive("track.bump_width", v)
+        n = len(self.asperity_phi)
+        _check(len(self.asperity_height) == n and len(self.asperity_width) == n,
+               "track.asperity_*",
+               "asperity_phi, asperity_height and asperity_width must have equal lengths")
+        for v in (*self.asperity_phi, *self.asperity_height):
+            _finite("track.asperity_phi/height", v)
+        for v in self.asperity_width:
+            _positive("track.asperity_width", v)
+
+
+@dataclass(frozen=True)
+class ContactParams:
+    """Force-based contact of the ball with the track (seed chapter 4; bfr_sim.contact).
+
+    The ball touches the two plate edges; in the frame's plane it is a disc of the rolling
+    radius R pressed onto the contour. Normal force (seed eq. 4.15 with q = 1)
+    ``F_n = k w^n + d w^p w_dot``, ``w`` the penetration [m], clipped at 0 (Hunt-Crossley for
+    p = n); tangential force a stick spring-damper bounded by ``static_friction * F_n`` that
+    slides at ``dynamic_friction * F_n``.
+
+    Attributes
+    ----------
+    stiffness : float
+        k [N/m^n]; 0 derives it from Hertz (seed eq. 4.16 with the Poisson factors), a solid
+        sphere of radius R_b on each of the two edges, whose normals are inclined by
+        ``acos(R / R_b)`` to the plane: ``k = 2 cos^(5/2)(gamma) 4/3 E* sqrt(R_b)``.
+    exponent : float
+        n [-], 3/2 for Hertz contact.
+    ball_modulus, frame_modulus : float
+        Young's moduli [Pa] (a hollow ABS/celluloid ball, aluminium plates).
+    ball_poisson, frame_poisson : float
+        Poisson ratios [-].
+    restitution : float
+        Coefficient of restitution [-] of a normal impact at ``restitution_speed`` [m/s];
+        the damping coefficient d is solved for it (bfr_sim.contact.damping_for_restitution).
+    damping_exponent : float
+        p [-] of the damping term ``d w^p w_dot`` (seed eq. 4.15). ``p = n`` is Hunt and
+        Crossley's law (restitution ~ 1 - 1.5 (1 - e) v / v_e: near 1 for slow impacts, so
+        a bouncing ball never settles); ``p = n / 2 - 1/2`` (1/4 for n = 3/2, Tsuji et al.
+        1992) gives a restitution independent of the impact speed (the default).
+    static_friction, dynamic_friction : float
+        mu_s, mu_d [-] of the ball on a plate edge (the in-plane law uses ``mu R_b / R``:
+        the groove's wedge effect, bfr_sim.contact).
+    tangential_stiffness : float
+        [N/m] of the stick spring at the contact (Mindlin: about 0.8 of the normal one).
+    tangential_damping : float
+        [N s/m] of the stick damper.
+    time_step : float
+        [s] fixed step of the compiled contact integrator (contact modes near 1-2 kHz).
+    """
+
+    stiffness: float = 0.0
+    exponent: float = 1.5
+    ball_modulus: float = 2.3e9
+    ball_poisson: float = 0.35
+    frame_modulus: float = 70.0e9
+    frame_poisson: float = 0.33
+    restitution: float = 0.85
+    restitution_speed: float = 0.1
+    damping_exponent: float = 0.25
+    static_friction: float = 0.6
+    dynamic_friction: float = 0.5
+    tangential_stiffness: float = 1.5e5
+    tangential_damping: float = 20.0
+    time_step: float = 2.0e-5
+
+    def __post_init__(self) -> None:
+        _nonnegative("contact.stiffness", self.stiffness)
+        _positive("contact.exponent", self.exponent)
+        _positive("contact.ball_modulus", self.ball_modulus)
+        _positive("contact.frame_modulus", self.frame_modulus)
+        for name in ("ball_poisson", "frame_poisson"):
+            v = getattr(self, name)
+            _finite(f"contact.{name}", v)
+            _check(-1.0 < v < 0.5, f"contact.{name}", "must be within (-1, 0.5)")
+        _finite("contact.restitution", self.restitution)
+        _check(0.0 < self.restitution <= 1.0, "contact.restitution", "must be within (0, 1]")
+        _positive("contact.restitution_speed", self.restitution_speed)
+        _nonnegative("contact.damping_exponent", self.damping_exponent)
+        _nonnegative("contact.static_friction", self.static_friction)
+        _nonnegative("contact.dynamic_friction", self.dynamic_friction)
+        _check(self.dynamic_friction <= self.static_friction, "contact.dynamic_friction",
+               "must not exceed static_friction")
+        _positive("contact.tangential_stiffness", self.tangential_stiffness)
+        _nonnegative("contact.tangential_damping", self.tangential_damping)
+        _positive("contact.time_step", self.time_step)
+        _check(self.time_step <= 1e-3, "contact.time_step", "must be <= 1e-3 s (stiff contact)")
+
+    def effective_modulus(self) -> float:
+        """E* = 1 / ((1 - nu_b^2) / E_b + (1 - nu_f^2) / E_f) [Pa] (Hertz)."""
+        return 1.0 / ((1.0 - self.ball_poisson**2) / self.ball_modulus
+                      + (1.0 - self.frame_poisson**2) / self.frame_modulus)
 
 
 @dataclass(frozen=True)
@@ -240,8 +368,19 @@ class RigParams:
     joint: JointParams = field(default_factory=JointParams)
     actuator: ActuatorParams = field(default_factory=ActuatorParams)
     track: TrackParams = field(default_factory=TrackParams)
+    contact: ContactParams = field(default_factory=ContactParams)
 
     def __post_init__(self) -> None:
+        self.check_rigid()
+
+    def check_rigid(self) -> None:
+        """Raise :class:`ParameterError` if the rigid model cannot represent the track.
+
+        The rigid model needs a ball-centre curve without cusps: every concave part of the
+        track, ``track.bump_*`` included, must be gentler than the rolling radius. Sharp
+        bumps that only the contact model (bfr_sim.contact) can roll over belong in
+        ``track.asperity_*``, which this check (and the rigid model) leaves out.
+        """
         from bfr_sim.geometry import OffsetCurve  # noqa: PLC0415 (geometry imports params)
 
         curve = OffsetCurve.from_params(self)
@@ -250,6 +389,22 @@ class RigParams:
                "the ball-centre curve has a cusp (a concave part of the track is sharper "
                f"than the rolling radius R = {self.ball.rolling_radius:.4g} m; min |p'| = "
                f"{lam_min:.3g} m/rad): widen the bumps or use the contact model")
+
+    @property
+    def contact_stiffness(self) -> float:
+        """Hunt-Crossley stiffness k [N/m^n]: ``contact.stiffness``, or Hertz if that is 0.
+
+        Hertz (seed eq. 4.16, with the Poisson factors): each of the two plate edges presses
+        on the ball along a line inclined by gamma, ``cos gamma = R / R_b``, to the frame's
+        plane; an in-plane penetration w compresses each contact by ``w cos gamma``, so the
+        in-plane force is ``2 cos gamma k_H (w cos gamma)^(3/2)`` with
+        ``k_H = 4/3 E* sqrt(R_b)`` (sphere on a locally flat edge).
+        """
+        if self.contact.stiffness > 0.0:
+            return self.contact.stiffness
+        cos_g = self.ball.rolling_radius / self.ball.radius
+        k_h = 4.0 / 3.0 * self.contact.effective_modulus() * math.sqrt(self.ball.radius)
+        return 2.0 * cos_g ** (1.0 + self.contact.exponent) * k_h
 
     def replace(self, **changes: Any) -> RigParams:
         """Return a copy with dotted-name changes, e.g. ``replace(**{"ball.mass": 3e-3})``."""
@@ -330,7 +485,7 @@ def _drop_zero_entries(orders_or_pos: tuple, *values: tuple) -> tuple[tuple, ...
 
 def params_from_dict(d: Mapping[str, Any]) -> RigParams:
     """Build :class:`RigParams` from the nested ``ros__parameters`` mapping."""
-    known = {"ball", "frame", "environment", "joint", "actuator", "track"}
+    known = {"ball", "frame", "environment", "joint", "actuator", "track", "contact"}
     unknown = set(d) - known
     if unknown:
         raise ParameterError(f"unknown parameter groups {sorted(unknown)}")
@@ -352,6 +507,14 @@ def params_from_dict(d: Mapping[str, Any]) -> RigParams:
                          tuple(h for h in hgt if h != 0.0),
                          tuple(wid[i] for i in range(len(pos)) if hgt[i] != 0.0))
     track.update(bump_phi=pos, bump_height=hgt, bump_width=wid)
+    pos = tuple(float(v) for v in track.get("asperity_phi", ()))
+    hgt = tuple(float(v) for v in track.get("asperity_height", ()))
+    wid = tuple(float(v) for v in track.get("asperity_width", ()))
+    if len(pos) == len(hgt) == len(wid):
+        keep = [i for i in range(len(pos)) if hgt[i] != 0.0]
+        pos, hgt, wid = (tuple(pos[i] for i in keep), tuple(hgt[i] for i in keep),
+                         tuple(wid[i] for i in keep))
+    track.update(asperity_phi=pos, asperity_height=hgt, asperity_width=wid)
     return RigParams(
         ball=_build(BallParams, _group(d, "ball"), "ball"),
         frame=_build(FrameParams, frame, "frame"),
@@ -359,6 +522,7 @@ def params_from_dict(d: Mapping[str, Any]) -> RigParams:
         joint=_build(JointParams, _group(d, "joint"), "joint"),
         actuator=_build(ActuatorParams, _group(d, "actuator"), "actuator"),
         track=_build(TrackParams, track, "track"),
+        contact=_build(ContactParams, _group(d, "contact"), "contact"),
     )
 
 
@@ -410,6 +574,8 @@ def params_to_ros_yaml(params: RigParams, header: str = "") -> str:
     t = d["track"]
     if not t["bump_phi"]:
         t.update(bump_phi=[0.0], bump_height=[0.0], bump_width=[0.05])
+    if not t["asperity_phi"]:
+        t.update(asperity_phi=[0.0], asperity_height=[0.0], asperity_width=[0.005])
     body = yaml.safe_dump({"/**": {"ros__parameters": d}}, sort_keys=False)
     lines = [f"# {h}" for h in header.splitlines()] if header else []
     return "\n".join([*lines, body])
