@@ -6,12 +6,11 @@ import math
 
 import numpy as np
 import pytest
-from scipy.optimize import brentq
-
 from bfr_sim.dynamics import RigidModel, rigid_rhs
 from bfr_sim.integrators import rk4_steps, solve_adaptive
 from bfr_sim.params import load_params
 from bfr_sim.simulate import simulate
+from scipy.optimize import brentq
 
 NOMINAL = load_params()
 
@@ -154,7 +153,7 @@ def test_rk4_converges_fourth_order(model: RigidModel) -> None:
                             rtol=1e-13, atol=1e-14)
     errs = []
     for dt in (2e-3, 1e-3, 5e-4):
-        n = int(round(0.1 / dt))
+        n = round(0.1 / dt)
         x = x0.copy()
         err = 0.0
         for k in range(1, len(t_out)):

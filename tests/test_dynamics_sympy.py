@@ -10,7 +10,6 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-
 from bfr_sim.dynamics import RigidModel
 from bfr_sim.params import load_params
 
@@ -96,7 +95,8 @@ def test_normal_force_matches_newton() -> None:
         vel = []
         for xi in xs:
             _, _, _, _, r_th, r_ph = f(*xi)
-            vel.append(np.array(r_th, float).ravel() * xi[2] + np.array(r_ph, float).ravel() * xi[3])
+            vel.append(np.array(r_th, float).ravel() * xi[2]
+                       + np.array(r_ph, float).ravel() * xi[3])
         r_ddot = (vel[1] - vel[0]) / (2 * h)
         nw = np.array(f(*x)[3], float).ravel()
         fn_ref = m * float(nw @ (r_ddot + np.array([0.0, g])))

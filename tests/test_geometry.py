@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 import pytest
-
 from bfr_sim.geometry import OffsetCurve
 from bfr_sim.params import ParameterError, RigParams, load_params, params_to_ros_yaml
+from scipy.integrate import quad
 
 NOMINAL = load_params()
 
@@ -34,7 +34,7 @@ def test_offset_curve_is_at_rolling_radius_along_the_normal(curve: OffsetCurve) 
 
 def test_derivatives_match_finite_differences(curve: OffsetCurve) -> None:
     phi = np.linspace(0.05, 6.2, 37)
-    p, p1, p2, p3 = curve.derivatives(phi)
+    _, p1, p2, p3 = curve.derivatives(phi)
     h = 1e-5
     pp, pm = curve.point(phi + h), curve.point(phi - h)
     np.testing.assert_allclose(p1, (pp - pm) / (2 * h), atol=1e-8)
@@ -69,8 +69,6 @@ def test_ball_angle_inverse(curve: OffsetCurve) -> None:
 
 
 def test_arc_length(curve: OffsetCurve) -> None:
-    from scipy.integrate import quad
-
     for a, b in [(0.0, 1.3), (0.4, 5.9)]:
         ref = quad(lambda x: float(curve.speed(x)), a, b, epsabs=1e-14, limit=200)[0]
         assert float(curve.arc_length(b) - curve.arc_length(a)) == pytest.approx(ref, rel=1e-10)

@@ -77,7 +77,7 @@ class ContourArrays:
 
 @njit
 def contour_kernel(phi, rho0, orders, ccos, csin, bump_phi, bump_h, bump_w):  # noqa: ANN001, ANN201
-    """rho and its first four derivatives with respect to phi.
+    """Rho and its first four derivatives with respect to phi.
 
     Works on a float or an array ``phi``. Bump derivatives use the Hermite polynomials:
     ``d^n/dd^n exp(-x^2/2) = (-1)^n He_n(x) exp(-x^2/2) / w^n``, ``x = d / w``.

@@ -20,7 +20,7 @@ from scipy.integrate import solve_ivp
 
 from bfr_sim._jit import njit
 
-__all__ = ["rk4_steps", "rk4_trajectory", "solve_adaptive", "IntegrationError"]
+__all__ = ["IntegrationError", "rk4_steps", "rk4_trajectory", "solve_adaptive"]
 
 FloatArray = NDArray[np.float64]
 

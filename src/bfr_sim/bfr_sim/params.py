@@ -183,7 +183,7 @@ class EnvironmentParams:
 
     @property
     def in_plane_gravity(self) -> float:
-        """g cos(eps) [m/s^2], gravity's component in the frame's plane."""
+        """In-plane gravity g cos(eps) [m/s^2], gravity's component in the frame's plane."""
         return self.gravity * math.cos(self.axis_misalignment)
 
 

@@ -1,4 +1,4 @@
-"""Simulate the rigid model: ``bfr simulate``.
+r"""Simulate the rigid model: ``bfr simulate``.
 
 Open loop from an initial state under a torque command that is constant or read from a CSV
 of ``(t, u)`` rows (zero-order hold, as a digital controller applies it). Writes a trajectory
@@ -27,7 +27,7 @@ from bfr_sim.dynamics import RigidModel, rigid_rhs
 from bfr_sim.integrators import IntegrationError, solve_adaptive
 from bfr_sim.params import ParameterError, RigParams, load_params
 
-__all__ = ["SimResult", "simulate", "torque_from_csv", "main", "CSV_COLUMNS"]
+__all__ = ["CSV_COLUMNS", "SimResult", "main", "simulate", "torque_from_csv"]
 
 FloatArray = NDArray[np.float64]
 
@@ -149,7 +149,7 @@ def simulate(model: RigidModel, x0: FloatArray, duration: float,
     if x0.shape != (4,) or not np.all(np.isfinite(x0)):
         raise ValueError(f"initial state must be 4 finite numbers, got {x0}")
     u_of_t = torque if callable(torque) else (lambda _t, _u=float(torque): _u)
-    n = int(round(duration / dt))
+    n = round(duration / dt)
     t = np.arange(n + 1) * dt
     u = np.array([float(u_of_t(ti)) for ti in t])
     if not np.all(np.isfinite(u)):
