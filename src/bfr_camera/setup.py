@@ -35,6 +35,7 @@ setup(
     entry_points={
         "console_scripts": [
             # "<executable> = bfr_camera.<module>:main",  -> lib/bfr_camera/<executable>
+            "camera_node = bfr_camera.camera_node:main",
         ],
     },
 )

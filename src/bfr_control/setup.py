@@ -35,6 +35,7 @@ setup(
     entry_points={
         "console_scripts": [
             "bfr = bfr_control.cli:main",
+            "controller_node = bfr_control.controller_node:main",
         ],
     },
 )

@@ -35,6 +35,8 @@ setup(
     entry_points={
         "console_scripts": [
             # "<executable> = bfr_sim.<module>:main",  -> lib/bfr_sim/<executable>
+            "simulator_node = bfr_sim.simulator_node:main",
+            "recorder_node = bfr_sim.recorder_node:main",
         ],
     },
 )

@@ -39,6 +39,11 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
         "main",
         "controller's region of attraction and robustness figures (closed-loop simulation)",
     ),
+    "rig": (
+        "bfr_control.rig",
+        "main",
+        "run the emulated rig: simulator, camera, controller and recorder nodes; summary",
+    ),
     "camera-eval": ("bfr_camera.evaluate", "main", "ball detector: accuracy and speed figures"),
     "analyze": (
         "bfr_sim.analysis.cli",

@@ -1,0 +1,365 @@
+"""The controller node: motor torque from the encoder and the camera, over topics.
+
+A thin node over :class:`bfr_control.controller.OrbitalController` (estimator, transverse
+coordinates, Riccati gains, PFL, supervisor):
+
+- subscribes ``joint_states`` (``sensor_msgs/JointState``: the frame joint's position and
+  velocity) and ``ball_observation`` (``bfr_interfaces/BallObservation``);
+- publishes ``effort_controller/commands`` (``std_msgs/Float64MultiArray``, one element,
+  reliable: the command topic of ros2_control's forward command controller) and
+  ``controller_state`` (``bfr_interfaces/ControllerState``) at every control step.
+
+When a step runs is ``loop.trigger``: on each observation (the camera rate; the default),
+on each joint_states sample (the encoder rate), or on a timer at ``control.rate``. Encoder
+samples between steps still go into the estimator's history (latency compensation).
+
+Safety, in the node whatever the core does:
+
+- the torque is clamped to ``control.torque_limit`` and is exactly 0 unless the mode is
+  ROLLING (WAITING, BALL_LOST and FAULT all command zero);
+- BALL_LOST (no valid fix for ``supervisor.lost_timeout``, the ball stopped or far from the
+  orbit) is latched: zero torque until the node is restarted or ``~/reset`` is called;
+- with the observation trigger a joint_states sample ``loop.max_step_gap`` after the last
+  step runs a step anyway, so a dead camera is noticed in time;
+- no joint_states for ``safety.watchdog_timeout`` seconds of wall time (dead driver or
+  simulator), non-finite or malformed samples, or samples stamped more than
+  ``safety.max_stamp_age`` away from the node's clock: zero torque, mode FAULT, an error
+  log; the controller starts afresh (WAITING) when good samples return;
+- on shutdown (SIGINT/SIGTERM) a last zero command is published.
+
+A freshly started node picks up a rolling ball (WAITING -> ROLLING once it has seen it near
+the orbit) or, if the ball is seen but stays off the orbit for ``safety.acquire_timeout``,
+reports it lost (mode BALL_LOST in ``controller_state``, one warning) while it keeps
+watching.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from typing import Any
+
+from bfr_camera.node_common import (
+    COMMAND_QOS,
+    JOINT_STATES_QOS,
+    STATE_QOS,
+    declare_parameter_tree,
+    load_yaml_parameters,
+    read_parameter_tree,
+    run_node,
+    stamp_to_ns,
+)
+from bfr_sim.params import default_params_path, params_from_dict
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from bfr_control.controller import (
+    BALL_LOST,
+    ROLLING,
+    WAITING,
+    Command,
+    ControllerConfig,
+    OrbitalController,
+    default_config_path,
+)
+from bfr_control.estimator import BallObservation
+from bfr_interfaces.msg import BallObservation as BallObservationMsg
+from bfr_interfaces.msg import ControllerState
+
+__all__ = ["ControllerNode", "main", "node_defaults"]
+
+_NS = 1_000_000_000
+MODE_CODES = {WAITING: ControllerState.WAITING, ROLLING: ControllerState.ROLLING,
+              BALL_LOST: ControllerState.BALL_LOST}
+_RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
+_CTRL_GROUPS = ("constraint", "orbit", "riccati", "control", "estimator", "supervisor")
+
+
+def node_defaults() -> dict[str, Any]:
+    """Defaults: rig.yaml (the model), controller.yaml, controller_node.yaml."""
+    d = dict(load_yaml_parameters(default_params_path()))
+    d.update(load_yaml_parameters(default_config_path()))
+    node_file = default_config_path().parent / "controller_node.yaml"
+    d.update(load_yaml_parameters(node_file))
+    return d
+
+
+class ControllerNode(Node):
+    """ROS 2 wrapper of :class:`OrbitalController` (module docstring)."""
+
+    def __init__(self) -> None:
+        super().__init__("controller")
+        self.defaults = node_defaults()
+        declare_parameter_tree(self, self.defaults)
+        p = read_parameter_tree(self, self.defaults)
+        model = params_from_dict({k: p[k] for k in _RIG_GROUPS})
+        config = ControllerConfig.from_dict({k: p[k] for k in _CTRL_GROUPS})
+        t0 = time.perf_counter()
+        self.ctrl = OrbitalController(model, config)
+        self._warm_up()
+        setup = time.perf_counter() - t0
+        loop, safety = p["loop"], p["safety"]
+        self.trigger = str(loop["trigger"]).lower()
+        if self.trigger not in ("observation", "joint_states", "timer"):
+            raise ValueError(f"loop.trigger must be observation, joint_states or timer, got "
+                             f"{loop['trigger']!r}")
+        self.joint_name = str(loop["joint_name"])
+        self.max_gap_ns = round(float(loop["max_step_gap"]) * _NS)
+        self.watchdog_timeout = float(safety["watchdog_timeout"])
+        self.max_age_ns = round(float(safety["max_stamp_age"]) * _NS)
+        self.acquire_timeout = float(safety["acquire_timeout"])
+        self.limit = config.control.torque_limit
+        self.cmd_pub = self.create_publisher(Float64MultiArray, "effort_controller/commands",
+                                             COMMAND_QOS)
+        self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
+        self.create_subscription(JointState, "joint_states", self._on_joints, JOINT_STATES_QOS)
+        self.create_subscription(BallObservationMsg, "ball_observation", self._on_ball,
+                                 STATE_QOS)
+        self.create_service(Trigger, "~/reset", self._on_reset)
+        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self.create_timer(min(0.1, self.watchdog_timeout / 2.0), self._watchdog,
+                          clock=self._steady)
+        if self.trigger == "timer":
+            self.create_timer(1.0 / config.control.rate, self._on_timer)
+        self.js: tuple[int, float, float] | None = None  # newest good sample
+        self.js_wall = time.monotonic()
+        self.first_js_ns: int | None = None
+        self.last_step_ns: int | None = None
+        self.pending: list[BallObservation] = []
+        self.fault = ""  # why the node is in FAULT (empty: not)
+        self.reported_mode = -1
+        self.off_orbit_since: float | None = None
+        self.reported_lost = False
+        self.stats = {"steps": 0, "observations": 0, "rolling_steps": 0, "faults": 0,
+                      "saturated": 0}
+        self.executor_ref: Any = None
+        self.get_logger().info(
+            f"controller: trigger {self.trigger}, torque limit {self.limit:g} N m, orbit mean "
+            f"phi_dot {self.ctrl.orbit.summary().get('mean_phi_dot', float('nan')):.3g} rad/s, "
+            f"set up in {setup:.2f} s; mode WAITING (no ball yet)")
+
+    def _warm_up(self) -> None:
+        """Run the core on a synthetic rolling ball, then reset it.
+
+        The compiled kernels (estimator, PFL) load on first use, which takes a noticeable
+        fraction of a second: better here than in the first control steps of a real run.
+        """
+        ctrl = self.ctrl
+        x = ctrl.orbit_state(0.3)
+        pos = ctrl.model.ball_position(x)
+        for k in range(8):
+            t = 0.005 * k
+            ctrl.step(t, float(x[0]) + float(x[2]) * t, float(x[2]),
+                      BallObservation(t, float(pos[0]), float(pos[1]), True))
+        ctrl.reset()
+
+    # -- inputs ----------------------------------------------------------------------------
+    def _parse_joints(self, msg: JointState) -> tuple[int, float, float] | str | None:
+        """(t_ns, theta, theta_dot), a fault string, or None (another joint's message)."""
+        names = list(msg.name)
+        if self.joint_name in names:
+            j = names.index(self.joint_name)
+        elif not names and len(msg.position) == 1:
+            j = 0
+        else:
+            return None
+        if j >= len(msg.position) or j >= len(msg.velocity):
+            return (f"joint_states for {self.joint_name!r} lack position or velocity "
+                    f"({len(msg.position)} positions, {len(msg.velocity)} velocities)")
+        theta, theta_dot = float(msg.position[j]), float(msg.velocity[j])
+        if not (math.isfinite(theta) and math.isfinite(theta_dot)):
+            return f"non-finite joint_states sample (theta {theta}, theta_dot {theta_dot})"
+        t_ns = stamp_to_ns(msg.header.stamp)
+        clock = self.get_clock()
+        now = clock.now().nanoseconds
+        if now > 0 and abs(now - t_ns) > self.max_age_ns:
+            return (f"joint_states stamped {(now - t_ns) / _NS:+.3f} s from the node's clock "
+                    f"(> {self.max_age_ns / _NS:g} s): stale data or a clock mismatch "
+                    f"(use_sim_time must match the publisher's clock)")
+        return t_ns, theta, theta_dot
+
+    def _on_joints(self, msg: JointState) -> None:
+        got = self._parse_joints(msg)
+        if got is None:
+            return
+        if isinstance(got, str):
+            self._enter_fault(got, stamp_to_ns(msg.header.stamp))
+            return
+        self.js_wall = time.monotonic()
+        if self.fault:
+            self.get_logger().info(f"joint_states good again after: {self.fault}; controller "
+                                   f"restarts in WAITING")
+            self.fault = ""
+            self.ctrl.reset()
+            self.pending.clear()
+            self.last_step_ns = None
+        if self.js is not None and got[0] <= self.js[0]:
+            return  # repeated or out-of-order sample
+        self.js = got
+        t_ns = got[0]
+        if self.first_js_ns is None:
+            self.first_js_ns = t_ns
+            self.get_logger().info("joint_states are arriving")
+        ref = self.last_step_ns if self.last_step_ns is not None else self.first_js_ns
+        if self.trigger == "joint_states":
+            self._step()
+        elif self.trigger == "observation" and (
+                any(o.t * _NS <= t_ns + 1 for o in self.pending)
+                or t_ns - ref >= self.max_gap_ns):
+            self._step()
+        else:
+            self.ctrl.estimator.record(t_ns / _NS, got[1], got[2])
+
+    def _on_ball(self, msg: BallObservationMsg) -> None:
+        self.stats["observations"] += 1
+        t_ns = stamp_to_ns(msg.header.stamp)
+        valid = bool(msg.valid) and msg.status == BallObservationMsg.FOUND
+        self.pending.append(BallObservation(t_ns / _NS, float(msg.x), float(msg.y), valid))
+        if len(self.pending) > 50:  # no joint_states to fuse them with: keep the newest
+            del self.pending[:-50]
+        if self.trigger == "observation" and self.js is not None and self.js[0] >= t_ns \
+                and not self.fault:
+            self._step()
+
+    def _on_timer(self) -> None:
+        if self.js is not None and not self.fault and (
+                self.last_step_ns is None or self.js[0] > self.last_step_ns):
+            self._step()
+
+    def _on_reset(self, request: Any, response: Any) -> Any:
+        self.ctrl.reset()
+        self.pending.clear()
+        self.reported_lost = False
+        self.off_orbit_since = None
+        self.get_logger().warn("reset requested: controller back in WAITING")
+        response.success = True
+        response.message = "controller reset to WAITING"
+        return response
+
+    # -- the control step --------------------------------------------------------------------
+    def _step(self) -> None:
+        assert self.js is not None
+        t_ns, theta, theta_dot = self.js
+        t = t_ns / _NS
+        due = [o for o in self.pending if o.t <= t + 1e-9]
+        if due:
+            self.pending = [o for o in self.pending if o.t > t + 1e-9]
+        cmd = self.ctrl.step(t, theta, theta_dot, due or None)
+        self.last_step_ns = t_ns
+        self.stats["steps"] += 1
+        torque = cmd.torque if (cmd.mode == ROLLING and math.isfinite(cmd.torque)) else 0.0
+        torque = min(max(torque, -self.limit), self.limit)
+        mode = MODE_CODES[cmd.mode]
+        reason = cmd.reason
+        # a ball seen but staying off the orbit is reported lost (the core keeps watching)
+        est = self.ctrl.estimator
+        acq = self.ctrl.config.supervisor.acquire_frames
+        if cmd.mode == WAITING and est.initialized and est.frames >= acq:
+            if self.off_orbit_since is None:
+                self.off_orbit_since = t
+            elif t - self.off_orbit_since > self.acquire_timeout:
+                mode = ControllerState.BALL_LOST
+                reason = (f"ball seen but off the orbit for {t - self.off_orbit_since:.2f} s: "
+                          f"not picked up ({cmd.reason})")
+                if not self.reported_lost:
+                    self.get_logger().warn(f"BALL_LOST: {reason}")
+                    self.reported_lost = True
+        else:
+            self.off_orbit_since = None
+        if cmd.mode == ROLLING:
+            self.stats["rolling_steps"] += 1
+            self.reported_lost = False
+        self._publish(t_ns, torque, mode, theta, theta_dot, cmd)
+        if mode != self.reported_mode:
+            self._log_mode(mode, t, reason, cmd)
+            self.reported_mode = mode
+
+    def _log_mode(self, mode: int, t: float, reason: str, cmd: Command) -> None:
+        log = self.get_logger()
+        if mode == ControllerState.ROLLING:
+            log.info(f"ROLLING at t = {t:.3f} s: ball picked up at phi = {cmd.phi:.3f} rad, "
+                     f"phi_dot = {cmd.phi_dot:.3f} rad/s")
+        elif mode == ControllerState.BALL_LOST and cmd.mode == BALL_LOST:
+            log.error(f"BALL_LOST at t = {t:.3f} s: {reason}; torque 0 (latched: restart the "
+                      f"node or call ~/reset)")
+        elif mode == ControllerState.WAITING:
+            log.info(f"WAITING at t = {t:.3f} s: {reason}")
+
+    def _publish(self, t_ns: int, torque: float, mode: int, theta: float, theta_dot: float,
+                 cmd: Command | None) -> None:
+        out = Float64MultiArray()
+        out.data = [float(torque)]
+        self.cmd_pub.publish(out)
+        st = ControllerState()
+        st.header.stamp.sec, st.header.stamp.nanosec = t_ns // _NS, t_ns % _NS
+        st.mode = mode
+        st.theta, st.theta_dot = float(theta), float(theta_dot)
+        nan = math.nan
+        if cmd is not None:
+            st.phi, st.phi_dot = float(cmd.phi), float(cmd.phi_dot)
+            st.y, st.y_dot, st.z = float(cmd.y), float(cmd.y_dot), float(cmd.z)
+            st.phase = float(cmd.phi) % math.pi if math.isfinite(cmd.phi) else nan
+            st.torque_unsaturated = float(cmd.torque_unsat) if mode == ControllerState.ROLLING \
+                else 0.0
+            last_fix = self.ctrl.estimator.last_fix_t
+            st.ball_age = float(t_ns / _NS - last_fix) if math.isfinite(last_fix) else math.inf
+        else:
+            st.phi = st.phi_dot = st.y = st.y_dot = st.z = st.phase = nan
+            st.torque_unsaturated = 0.0
+            st.ball_age = math.inf
+        st.torque = float(torque)
+        st.saturated = st.torque != st.torque_unsaturated
+        self.stats["saturated"] += int(st.saturated)
+        self.state_pub.publish(st)
+
+    # -- faults ----------------------------------------------------------------------------
+    def _enter_fault(self, why: str, t_ns: int | None) -> None:
+        log = self.get_logger()
+        if not self.fault:
+            self.stats["faults"] += 1
+            was = self.ctrl.mode
+            log.error(f"FAULT: {why}; torque 0" + (" (the ball was rolling: it is lost)"
+                                                    if was == ROLLING else ""))
+        else:
+            log.error(f"FAULT: {why}", throttle_duration_sec=2.0)
+        self.fault = why
+        if t_ns is None:
+            t_ns = self.js[0] if self.js is not None else self.get_clock().now().nanoseconds
+        theta, theta_dot = (self.js[1], self.js[2]) if self.js is not None else (math.nan,
+                                                                                  math.nan)
+        self._publish(t_ns, 0.0, ControllerState.FAULT, theta, theta_dot, None)
+        self.reported_mode = ControllerState.FAULT
+
+    def _watchdog(self) -> None:
+        gap = time.monotonic() - self.js_wall
+        if self.first_js_ns is None:  # not armed before the first sample
+            if gap > 5.0 and not self.fault:
+                self.get_logger().warn("no joint_states received yet (joint_states)",
+                                       throttle_duration_sec=10.0)
+            return
+        if gap > self.watchdog_timeout:
+            self._enter_fault(f"no joint_states for {gap:.2f} s (wall time): encoder driver or "
+                              f"simulator dead", None)
+
+    def on_shutdown(self) -> None:
+        """Publish a last zero command and log the counts."""
+        out = Float64MultiArray()
+        out.data = [0.0]
+        self.cmd_pub.publish(out)
+        s = self.stats
+        self.get_logger().info(
+            f"controller: {s['steps']} steps ({s['rolling_steps']} rolling, {s['saturated']} "
+            f"saturated), {s['observations']} observations, {s['faults']} fault(s); zero "
+            f"torque published on exit")
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run bfr_control controller_node``."""
+    return run_node(ControllerNode, argv)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

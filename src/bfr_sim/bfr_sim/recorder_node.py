@@ -1,0 +1,154 @@
+"""The recorder node: a ROS 2 bag (MCAP) of the rig's topics, readable by ``ros2 bag``.
+
+Generic: for each topic of ``recorder.topics`` it makes a raw (serialized) subscription and
+hands the CDR bytes to :class:`bfr_sim.io.bag.BagWriter`, which writes a rosbag2 directory
+(``metadata.yaml`` + one ``.mcap``; schemas ``ros2msg``, the project's own types included)
+that ``ros2 bag info/play``, Foxglove and :func:`bfr_sim.io.bag.read_bag` (``bfr diagnose``)
+read. The types of the topic contract are known in advance; any other topic's type is
+looked up in the ROS graph until a publisher appears.
+
+The receive (log) time of each message is the node's clock, as ``ros2 bag record`` does:
+simulated time under ``use_sim_time:=true``. Subscriptions are best-effort with a deep
+queue, which matches reliable and best-effort publishers alike.
+
+The writer flushes every ``recorder.flush_interval`` seconds and closes the bag on SIGINT or
+SIGTERM (a last flush, the MCAP summary and ``metadata.yaml``), so nothing received is
+lost; it then logs the message count per topic.
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from bfr_camera.node_common import (
+    declare_parameter_tree,
+    load_yaml_parameters,
+    read_parameter_tree,
+    run_node,
+)
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from bfr_sim.io.bag import BagWriter
+
+__all__ = ["CONTRACT_TYPES", "RecorderNode", "main", "node_defaults"]
+
+#: Types of the topic contract (README), by default topic name.
+CONTRACT_TYPES: dict[str, str] = {
+    "joint_states": "sensor_msgs/msg/JointState",
+    "effort_controller/commands": "std_msgs/msg/Float64MultiArray",
+    "ball_observation": "bfr_interfaces/msg/BallObservation",
+    "controller_state": "bfr_interfaces/msg/ControllerState",
+    "sim_truth": "bfr_interfaces/msg/SimTruth",
+    "camera/camera_info": "sensor_msgs/msg/CameraInfo",
+    "camera/image_raw": "sensor_msgs/msg/Image",
+    "clock": "rosgraph_msgs/msg/Clock",
+}
+
+
+def node_defaults() -> dict[str, Any]:
+    """Defaults from recorder_node.yaml (installed share folder or source tree)."""
+    src = Path(__file__).resolve().parent.parent / "config" / "recorder_node.yaml"
+    try:
+        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
+
+        inst = Path(get_package_share_directory("bfr_sim")) / "config" / "recorder_node.yaml"
+        if inst.is_file():
+            src = inst
+    except Exception:  # noqa: BLE001 - not installed: the source tree
+        pass
+    return dict(load_yaml_parameters(src))
+
+
+def message_class(type_name: str) -> type:
+    """The Python class of ``pkg/msg/Type``."""
+    pkg, _, name = type_name.split("/")
+    return getattr(importlib.import_module(f"{pkg}.msg"), name)
+
+
+class RecorderNode(Node):
+    """Records topics into a bag (module docstring)."""
+
+    def __init__(self) -> None:
+        super().__init__("recorder")
+        self.defaults = node_defaults()
+        declare_parameter_tree(self, self.defaults)
+        p = read_parameter_tree(self, self.defaults)["recorder"]
+        path = str(p["path"]) or datetime.now().strftime("bfr_%Y%m%d_%H%M%S")
+        self.depth = int(p["depth"])
+        self.bag = BagWriter(Path(path), flush_interval=float(p["flush_interval"]),
+                             custom_data={"recorded_by": "bfr_sim recorder_node"})
+        self.wanted: dict[str, str] = {}  # resolved topic -> configured name
+        for topic in p["topics"]:
+            self.wanted[self.resolve_topic_name(str(topic))] = str(topic)
+        self.subs: dict[str, Any] = {}
+        self.types: dict[str, str] = {}
+        self.counts: dict[str, int] = {}
+        for resolved, name in self.wanted.items():
+            known = CONTRACT_TYPES.get(name.lstrip("/")) or CONTRACT_TYPES.get(
+                resolved.lstrip("/"))
+            if known is not None:
+                self._subscribe(resolved, known)
+        self.create_timer(float(p["discovery_period"]), self._discover)
+        self.t_start = time.monotonic()
+        self.executor_ref: Any = None
+        self.get_logger().info(
+            f"recording {len(self.wanted)} topic(s) into {self.bag.path}: "
+            + ", ".join(sorted(self.wanted)))
+
+    def _subscribe(self, topic: str, type_name: str) -> None:
+        try:
+            cls = message_class(type_name)
+        except (ImportError, AttributeError, ValueError) as exc:
+            self.get_logger().error(f"cannot record {topic}: type {type_name} not importable "
+                                    f"({exc})", throttle_duration_sec=10.0)
+            return
+        qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
+                         reliability=ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.VOLATILE)
+        self.types[topic] = type_name
+        self.counts[topic] = 0
+        self.bag.add_topic(topic, type_name)
+
+        def callback(data: bytes, topic: str = topic, type_name: str = type_name) -> None:
+            self.bag.write(topic, type_name, data, max(self.get_clock().now().nanoseconds, 0))
+            self.counts[topic] += 1
+
+        self.subs[topic] = self.create_subscription(cls, topic, callback, qos, raw=True)
+
+    def _discover(self) -> None:
+        missing = [t for t in self.wanted if t not in self.subs]
+        if not missing:
+            return
+        graph = dict(self.get_topic_names_and_types())
+        for topic in missing:
+            types = graph.get(topic)
+            if types:
+                if len(types) > 1:
+                    self.get_logger().warn(f"{topic} has several types {types}; recording "
+                                           f"{types[0]}")
+                self._subscribe(topic, types[0])
+                self.get_logger().info(f"recording {topic} ({types[0]})")
+
+    def on_shutdown(self) -> None:
+        """Close the bag (flush, summary, metadata.yaml) and log the counts."""
+        self.bag.close()
+        wall = time.monotonic() - self.t_start
+        counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.counts.items()))
+        missing = [t for t in self.wanted if t not in self.subs]
+        self.get_logger().info(
+            f"bag {self.bag.path} closed: {self.bag.message_count} messages in {wall:.1f} s "
+            f"({counts})" + (f"; never seen: {', '.join(missing)}" if missing else ""))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``ros2 run bfr_sim recorder_node``."""
+    return run_node(RecorderNode, argv)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,227 @@
+"""The controller node alone, in its own process; the test plays the rig (plant + camera).
+
+The test steps the rigid model (bfr_sim.dynamics) itself and publishes ``/clock``,
+``joint_states`` and ``ball_observation`` like the simulator and camera nodes, in lock-step
+with the node (after each camera frame it waits for the node's answer). Then it feeds bad
+input: a missing ball, NaN encoder samples, stale stamps, a dead encoder, and checks the
+mode, the zero torque and the log.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import rosutil
+from bfr_camera.node_common import COMMAND_QOS, STATE_QOS
+from bfr_control.rig import orbit_start
+from bfr_sim.dynamics import RigidModel
+from bfr_sim.params import load_params
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+from bfr_interfaces.msg import BallObservation, ControllerState
+
+NS = 1_000_000_000
+MS = 1_000_000
+WAITING, ROLLING, BALL_LOST, FAULT = (ControllerState.WAITING, ControllerState.ROLLING,
+                                      ControllerState.BALL_LOST, ControllerState.FAULT)
+
+
+def stamp_ns(m: object) -> int:
+    s = m.header.stamp  # type: ignore[attr-defined]
+    return s.sec * NS + s.nanosec
+
+
+class Rig:
+    """Plant, encoder and camera of the test, in lock-step with the controller node."""
+
+    def __init__(self, h: rosutil.RosHarness, x0: list[float] | None = None,
+                 t0_ns: int = 0) -> None:
+        self.h = h
+        self.model = RigidModel(load_params())
+        self.x = np.zeros(6)
+        if x0 is not None:
+            self.x[:4] = x0
+        self.t_ns = t0_ns
+        self.u = 0.0
+        self.rng = np.random.default_rng(3)
+        n = h.node
+        self.clock_pub = n.create_publisher(Clock, "/clock", 10)
+        self.js_pub = n.create_publisher(JointState, "joint_states", 50)
+        self.obs_pub = n.create_publisher(BallObservation, "ball_observation", STATE_QOS)
+        self.cmds: list[float] = []
+        self.states: list[ControllerState] = []
+        self.cmd_sub = n.create_subscription(Float64MultiArray, "effort_controller/commands",
+                                             lambda m: self.cmds.append(m.data[0]), COMMAND_QOS)
+        self.state_sub = n.create_subscription(ControllerState, "controller_state",
+                                               self.states.append, STATE_QOS)
+        self.truth: list[tuple[int, float, float]] = []  # t, phi, phi_dot
+
+    def wait_for_node(self, proc: rosutil.NodeProcess) -> None:
+        for e in (self.js_pub, self.obs_pub, self.clock_pub):
+            self.h.wait_for_match(e, timeout=60)
+        self.h.wait_for_match(self.state_sub, timeout=60)
+        self.h.spin_for(1.0)  # let the node's side of the discovery finish too
+        assert proc.alive, proc.output()
+
+    def clock(self, t_ns: int) -> None:
+        m = Clock()
+        m.clock.sec, m.clock.nanosec = t_ns // NS, t_ns % NS
+        self.clock_pub.publish(m)
+
+    def joint_state(self, t_ns: int | None = None, theta: float | None = None,
+                    theta_dot: float | None = None) -> None:
+        t_ns = self.t_ns if t_ns is None else t_ns
+        m = JointState()
+        m.header.stamp.sec, m.header.stamp.nanosec = t_ns // NS, t_ns % NS
+        m.name = ["frame_joint"]
+        m.position = [float(self.x[0]) if theta is None else theta]
+        m.velocity = [float(self.x[2]) if theta_dot is None else theta_dot]
+        m.effort = [self.u]
+        self.js_pub.publish(m)
+
+    def observation(self, valid: bool = True) -> None:
+        m = BallObservation()
+        m.header.stamp.sec, m.header.stamp.nanosec = self.t_ns // NS, self.t_ns % NS
+        m.header.frame_id = "world"
+        if valid:
+            bx, by = self.model.ball_position(self.x[:4]) + 1e-4 * self.rng.standard_normal(2)
+            m.status, m.valid, m.confidence = BallObservation.FOUND, True, 0.9
+            m.x, m.y = float(bx), float(by)
+            m.phi = float(self.x[0] + math.atan2(bx, by))
+            m.theta_used = float(self.x[0])
+        else:
+            m.status, m.valid = BallObservation.NOT_FOUND, False
+            m.x = m.y = m.phi = m.theta_used = math.nan
+        m.u = m.v = m.radius_px = math.nan
+        self.obs_pub.publish(m)
+
+    def answered(self) -> bool:
+        return bool(self.states) and stamp_ns(self.states[-1]) >= self.t_ns and \
+            bool(self.cmds) and self.cmds[-1] == self.states[-1].torque
+
+    def frame(self, proc: rosutil.NodeProcess, valid: bool = True, steps: int = 5) -> None:
+        """Advance one camera period (encoder at 1 kHz), show a frame, wait for the answer."""
+        for _ in range(steps):
+            self.x = self.model.step(self.x, self.u, 1e-3, 1)
+            self.t_ns += MS
+            self.clock(self.t_ns)
+            self.joint_state()
+        self.truth.append((self.t_ns, float(self.x[1]), float(self.x[3])))
+        self.observation(valid)
+        assert self.h.spin_until(self.answered, timeout=20.0), proc.output()[-3000:]
+        self.u = self.cmds[-1]
+
+    def modes_since(self, t_ns: int) -> list[int]:
+        return [s.mode for s in self.states if stamp_ns(s) > t_ns]
+
+
+def test_controller_node_keeps_the_ball_rolling_and_stops_safely(
+        ros_harness: rosutil.RosHarness, node_processes) -> None:  # noqa: ANN001
+    h = ros_harness
+    start = orbit_start(0.3, 0.05)
+    rig = Rig(h, [start[f"initial.{k}"] for k in ("theta", "phi", "theta_dot", "phi_dot")])
+    ctl = node_processes.start("bfr_control", "controller_node",
+                               ros_args=["-p", "use_sim_time:=true"])
+    rig.wait_for_node(ctl)
+    for _ in range(30):  # the first exchange, until the node's side of discovery is done
+        rig.clock(0)
+        rig.joint_state()
+        rig.observation()
+        if h.spin_until(rig.answered, timeout=1.0):
+            break
+    assert rig.answered(), ctl.output()[-3000:]
+    for _ in range(800):  # 4 s of closed loop over DDS
+        rig.frame(ctl)
+    truth = np.array(rig.truth)
+    assert np.all(truth[:, 2] > 0.5), "the ball stopped"
+    mean_pd = (truth[-1, 1] - truth[0, 1]) / ((truth[-1, 0] - truth[0, 0]) / NS)
+    assert 2.2 < mean_pd < 2.6
+    assert rig.states[-1].mode == ROLLING and "ROLLING at t = " in ctl.output()
+    assert max(abs(c) for c in rig.cmds) <= 0.1 + 1e-12
+    tail = [s for s in rig.states if stamp_ns(s) > 2 * NS]
+    assert np.sqrt(np.mean([s.y ** 2 for s in tail])) < 0.02  # on the constraint
+    assert all(0.0 <= s.ball_age < 0.006 for s in tail)
+    s = rig.states[-1]
+    assert s.phase == rig.states[-1].phi % math.pi and math.isfinite(s.z)
+
+    # the ball disappears: BALL_LOST after supervisor.lost_timeout (0.1 s), zero torque ...
+    t_lost = rig.t_ns
+    for _ in range(30):
+        rig.frame(ctl, valid=False)
+    assert BALL_LOST in rig.modes_since(t_lost)
+    assert rig.states[-1].mode == BALL_LOST and rig.states[-1].torque == 0.0
+    assert rig.cmds[-1] == 0.0
+    # ... latched: the ball is back (in the camera), the torque stays zero
+    for _ in range(10):
+        rig.frame(ctl)
+    assert rig.states[-1].mode == BALL_LOST and rig.cmds[-1] == 0.0
+    assert "BALL_LOST at t = " in ctl.output() and "no valid ball fix" in ctl.output()
+    # ~/reset re-arms it
+    client = h.node.create_client(Trigger, "/controller/reset")
+    assert client.wait_for_service(timeout_sec=10.0)
+    fut = client.call_async(Trigger.Request())
+    assert h.spin_until(fut.done, timeout=10.0) and fut.result().success
+    t_reset = rig.t_ns
+    rig.frame(ctl)
+    assert rig.modes_since(t_reset)[0] == WAITING
+
+    # a NaN encoder sample: FAULT, zero torque; good samples again: WAITING
+    t_nan = rig.t_ns + MS
+    rig.clock(t_nan)
+    rig.joint_state(t_nan, theta=math.nan)
+    assert h.spin_until(lambda: rig.states[-1].mode == FAULT, timeout=10.0), ctl.output()[-2000:]
+    assert rig.states[-1].torque == 0.0 and rig.cmds[-1] == 0.0
+    rig.t_ns = t_nan
+    for _ in range(4):
+        rig.frame(ctl)
+    assert rig.states[-1].mode in (WAITING, ROLLING, BALL_LOST)
+    out = ctl.output()
+    assert "FAULT: non-finite joint_states sample" in out
+    assert "controller restarts in WAITING" in out
+    assert ctl.alive
+
+
+def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
+                                                node_processes) -> None:  # noqa: ANN001
+    h = ros_harness
+    rig = Rig(h, [0.0, 0.0, 0.0, 2.0], t0_ns=10 * NS)
+    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
+        "-p", "use_sim_time:=true", "-p", "safety.watchdog_timeout:=0.5",
+        "-p", "loop.trigger:=joint_states"])
+    rig.wait_for_node(ctl)
+    # a good sample, then one stamped 2 s behind the clock
+    for _ in range(20):
+        rig.t_ns += MS
+        rig.clock(rig.t_ns)
+        rig.joint_state()
+        if h.spin_until(lambda: bool(rig.states), timeout=1.0):
+            break
+    assert rig.states, ctl.output()[-2000:]
+    assert rig.states[-1].mode == WAITING and rig.cmds[-1] == 0.0
+    rig.t_ns += MS
+    rig.clock(rig.t_ns)
+    rig.joint_state(rig.t_ns - 2 * NS)
+    assert h.spin_until(lambda: rig.states[-1].mode == FAULT, timeout=10.0), ctl.output()[-2000:]
+    assert rig.cmds[-1] == 0.0
+    assert "joint_states stamped +2.000 s from the node's clock" in ctl.output()
+    # good samples: back to WAITING (joint_states trigger: a step per sample)
+    for _ in range(5):
+        rig.t_ns += MS
+        rig.clock(rig.t_ns)
+        rig.joint_state()
+    assert h.spin_until(lambda: rig.states[-1].mode == WAITING, timeout=10.0)
+    # the encoder goes silent (a dead driver): FAULT and zero torque within the watchdog time
+    n = len(rig.states)
+    assert h.spin_until(lambda: any(s.mode == FAULT for s in rig.states[n:]), timeout=10.0)
+    assert rig.cmds[-1] == 0.0
+    assert "no joint_states for" in ctl.output() and ctl.alive
+    # shutdown: a last zero command, a clean exit
+    n_cmd = len(rig.cmds)
+    assert ctl.stop() == 0
+    h.spin_for(0.5)
+    assert len(rig.cmds) > n_cmd and rig.cmds[-1] == 0.0
+    assert "zero torque published on exit" in ctl.log_path.read_text()

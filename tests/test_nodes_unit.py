@@ -1,0 +1,204 @@
+"""Pure parts of the node suite (no ROS processes): parameters, conversions, the simulator's
+actuator and schedule, the camera's theta buffer, the rig's orbit start and the launch file."""
+
+from __future__ import annotations
+
+import ast
+import math
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from bfr_camera.camera_node import ThetaBuffer
+from bfr_camera.camera_node import node_defaults as camera_defaults
+from bfr_camera.node_common import _cast, flatten, image_to_array, unflatten
+from bfr_control.rig import orbit_start
+from bfr_sim.params import load_params
+from bfr_sim.simulator_node import RigSimulation, Schedule
+from bfr_sim.simulator_node import node_defaults as sim_defaults
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+# -- parameters mirrored from YAML -----------------------------------------------------------
+def test_flatten_round_trip() -> None:
+    tree = {"ball": {"mass": 3e-3}, "frame": {"contour": {"a": 0.1, "harmonic_orders": [4]}}}
+    flat = flatten(tree)
+    assert flat == {"ball.mass": 3e-3, "frame.contour.a": 0.1,
+                    "frame.contour.harmonic_orders": [4]}
+    assert unflatten(flat) == tree
+
+
+@pytest.mark.parametrize(("value", "default", "expected"), [
+    (1, 0.5, 1.0), (2.0, 3, 2), ("x", "y", "x"), (True, False, True), ([1, 2], [0.5], [1.0, 2.0]),
+])
+def test_cast_to_default_type(value: object, default: object, expected: object) -> None:
+    got = _cast("p", value, default)
+    assert got == expected and type(got) is type(expected)
+
+
+@pytest.mark.parametrize(("value", "default"), [("a", 1.0), (1.5, 2), (1.0, True)])
+def test_cast_rejects(value: object, default: object) -> None:
+    with pytest.raises(ValueError, match="parameter p"):
+        _cast("p", value, default)
+
+
+def test_node_defaults_mirror_the_yaml_files() -> None:
+    d = sim_defaults()
+    assert d["ball"]["mass"] == pytest.approx(3e-3)  # rig.yaml
+    assert d["camera"]["frame_rate"] == pytest.approx(200.0)  # camera.yaml
+    assert d["sim"]["mode"] == "realtime"  # simulator_node.yaml
+    assert "detector" not in d  # the simulator renders; it does not detect
+    c = camera_defaults()
+    assert c["ball"] == {"radius": pytest.approx(16.6e-3)}
+    assert "detector" in c and c["input"]["joint_name"] == "frame_joint"
+
+
+# -- image conversion ------------------------------------------------------------------------
+def _img(arr: np.ndarray, encoding: str, big: bool = False) -> SimpleNamespace:
+    h, w = arr.shape[:2]
+    data = arr.astype(arr.dtype.newbyteorder(">" if big else "<")).tobytes()
+    return SimpleNamespace(height=h, width=w, step=len(data) // h, encoding=encoding,
+                           is_bigendian=int(big), data=data)
+
+
+def test_image_to_array_encodings() -> None:
+    rng = np.random.default_rng(0)
+    a8 = rng.integers(0, 255, (4, 6), dtype=np.uint8)
+    got, err = image_to_array(_img(a8, "mono8"))
+    assert err == "" and np.array_equal(got, a8)
+    a16 = rng.integers(0, 65535, (4, 6), dtype=np.uint16)
+    for big in (False, True):
+        got, err = image_to_array(_img(a16, "mono16", big))
+        assert err == "" and np.array_equal(got, a16)
+    rgb = rng.integers(0, 255, (4, 6, 3), dtype=np.uint8)
+    got, err = image_to_array(_img(rgb, "rgb8"))
+    assert err == "" and np.array_equal(got, rgb[..., ::-1])
+    f = rng.random((3, 5)).astype(np.float32)
+    got, err = image_to_array(_img(f, "32FC1"))
+    assert err == "" and np.array_equal(got, f)
+
+
+def test_image_to_array_padded_rows() -> None:
+    a = np.arange(12, dtype=np.uint8).reshape(3, 4)
+    padded = np.zeros((3, 8), np.uint8)
+    padded[:, :4] = a
+    msg = SimpleNamespace(height=3, width=4, step=8, encoding="mono8", is_bigendian=0,
+                          data=padded.tobytes())
+    got, err = image_to_array(msg)
+    assert err == "" and np.array_equal(got, a)
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    ({"encoding": "yuv422"}, "unsupported image encoding"),
+    ({"data": b"\0" * 10}, "image data has 10 B"),
+    ({"step": 2}, "smaller than width"),
+    ({"height": 0}, "empty image"),
+])
+def test_image_to_array_rejects(change: dict, match: str) -> None:
+    msg = _img(np.zeros((4, 6), np.uint8), "mono8")
+    for k, v in change.items():
+        setattr(msg, k, v)
+    got, err = image_to_array(msg)
+    assert got is None and match in err
+
+
+# -- camera node: theta at the exposure time --------------------------------------------------
+def test_theta_buffer_interpolates_and_extrapolates() -> None:
+    buf = ThetaBuffer(max_gap=0.01)
+    assert buf.theta_at(0)[0] is None
+    w = 2.0  # constant rate: Hermite interpolation and extrapolation are exact
+    for k in range(10):
+        t = k * 1_000_000
+        buf.add(t, 0.1 + w * t * 1e-9, w)
+    th, why = buf.theta_at(4_300_000)
+    assert why == "" and th == pytest.approx(0.1 + w * 4.3e-3)
+    th, _ = buf.theta_at(9_000_000 + 5_000_000)  # 5 ms after the newest sample
+    assert th == pytest.approx(0.1 + w * 14e-3)
+    th, why = buf.theta_at(9_000_000 + 20_000_000)
+    assert th is None and "older than the frame" in why
+    assert buf.theta_at(-1)[0] is None
+    buf.add(5, 99.0, 0.0)  # out of order: ignored
+    assert buf.theta_at(9_000_000)[0] == pytest.approx(0.1 + w * 9e-3)
+
+
+# -- simulator: actuator, timeout, schedule, truth ---------------------------------------------
+@pytest.fixture(scope="module")
+def params():  # noqa: ANN201
+    return load_params()
+
+
+def test_simulation_clamps_and_ignores_bad_commands(params) -> None:  # noqa: ANN001
+    sim = RigSimulation(params, [0.0, 0.0, 0.0, 2.0], 1e-3, command_timeout=0.1)
+    assert sim.applied_command() == 0.0  # no command yet
+    assert sim.set_command([0.5]) == ""
+    assert sim.applied_command() == pytest.approx(params.actuator.torque_limit)
+    assert sim.set_command([-0.02]) == ""
+    assert sim.applied_command() == pytest.approx(-0.02)
+    assert "not finite" in sim.set_command([math.nan])
+    assert "2 elements" in sim.set_command([0.01, 0.02])
+    assert "0 elements" in sim.set_command([])
+    assert sim.applied_command() == pytest.approx(-0.02)  # the last good command holds
+    for _ in range(100):
+        sim.step()
+    assert sim.applied_command() == pytest.approx(-0.02) and not sim.timed_out
+    sim.step()  # 101 ms after the command
+    assert sim.applied_command() == 0.0 and sim.timed_out
+
+
+def test_simulation_truth_is_consistent(params) -> None:  # noqa: ANN001
+    sim = RigSimulation(params, [-0.17, 0.3, 0.06, 2.3])
+    ball, vel = sim.ball_kinematics()
+    assert np.allclose(ball[:2], sim.model.ball_position(sim.x[:4]))
+    sim.set_command([0.01])
+    tr0 = sim.truth()
+    sim.step()
+    tr1 = sim.truth()
+    assert np.allclose((tr1.ball - tr0.ball) / sim.dt, vel, rtol=2e-3, atol=1e-4)
+    assert tr1.spin - tr0.spin == pytest.approx(tr0.spin_rate * sim.dt, rel=2e-3)
+    assert tr1.torque == pytest.approx(0.01 * params.actuator.torque_gain)
+    assert tr1.normal_force > 0.0
+    e0, e1 = tr0.kinetic + tr0.potential, tr1.kinetic + tr1.potential
+    assert e1 - e0 == pytest.approx(tr1.x[4] - tr0.x[4], rel=1e-3)  # work in = energy gained
+
+
+def test_simulation_rejects_bad_settings(params) -> None:  # noqa: ANN001
+    with pytest.raises(ValueError, match="time_step"):
+        RigSimulation(params, [0, 0, 0, 0], time_step=0.0)
+    with pytest.raises(ValueError, match="initial state"):
+        RigSimulation(params, [0, math.nan, 0, 0])
+
+
+def test_schedule_on_the_step_grid() -> None:
+    step = 1_000_000
+    for rate, expect in ((500.0, 500), (200.0, 200), (1000.0, 1000), (165.0, 165)):
+        s = Schedule(rate, step, "r")
+        n = sum(s.due(k * step) for k in range(1000))
+        assert n == expect
+    with pytest.raises(ValueError, match="must be > 0"):
+        Schedule(0.0, step, "joint_states.rate")
+
+
+# -- rig: start on the orbit, the launch file ---------------------------------------------------
+def test_orbit_start_is_on_the_controller_orbit() -> None:
+    s = orbit_start(0.3, 0.0)
+    assert s["initial.phi"] == pytest.approx(0.3)
+    assert 1.5 < s["initial.phi_dot"] < 3.5
+    s2 = orbit_start(0.3, 0.05)
+    assert s2["initial.theta"] - s["initial.theta"] == pytest.approx(0.05)
+
+
+def test_launch_file_names_existing_executables_and_files() -> None:
+    path = REPO / "src" / "bfr_control" / "launch" / "rig.launch.py"
+    tree = ast.parse(path.read_text())
+    strings = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
+               and isinstance(n.value, str)}
+    for exe in ("simulator_node", "camera_node", "controller_node", "recorder_node"):
+        assert exe in strings
+    for f in ("rig.yaml", "camera.yaml", "simulator_node.yaml", "controller_node.yaml",
+              "hardware.yaml"):
+        assert f in strings
+        assert list(REPO.glob(f"src/*/config/{f}")), f
+    assert any(isinstance(n, ast.FunctionDef) and n.name == "generate_launch_description"
+               for n in tree.body)
