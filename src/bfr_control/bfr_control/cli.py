@@ -44,6 +44,7 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
         "main",
         "run the emulated rig: simulator, camera, controller and recorder nodes; summary",
     ),
+    "bench": ("bfr_control.bench", "main", "performance figures side by side, with budgets"),
     "camera-eval": ("bfr_camera.evaluate", "main", "ball detector: accuracy and speed figures"),
     "analyze": (
         "bfr_sim.analysis.cli",
