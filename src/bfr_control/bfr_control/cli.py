@@ -34,18 +34,28 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
         "main",
         "simulate the rigid model, open loop or with the controller (--controller)",
     ),
-    "control-eval": (
-        "bfr_control.control_eval",
+    "diagnose": (
+        "bfr_sim.diagnose.cli",
         "main",
-        "controller's region of attraction and robustness figures (closed-loop simulation)",
+        "locate, name and model what the nominal model leaves out of a recording",
+    ),
+    "blindtest": (
+        "bfr_control.blindtest",
+        "main",
+        "prove bfr diagnose on recordings with hidden effects (confusion matrix, accuracy)",
     ),
     "rig": (
         "bfr_control.rig",
         "main",
         "run the emulated rig: simulator, camera, controller and recorder nodes; summary",
     ),
-    "bench": ("bfr_control.bench", "main", "performance figures side by side, with budgets"),
+    "control-eval": (
+        "bfr_control.control_eval",
+        "main",
+        "controller's region of attraction and robustness figures (closed-loop simulation)",
+    ),
     "camera-eval": ("bfr_camera.evaluate", "main", "ball detector: accuracy and speed figures"),
+    "bench": ("bfr_control.bench", "main", "performance figures side by side, with budgets"),
     "analyze": (
         "bfr_sim.analysis.cli",
         "main",
