@@ -151,23 +151,41 @@ def curve_terms(phi, P, R, rho0, orders, ccos, csin, bphi, bh, bw):  # noqa: ANN
 
 
 @njit
-def mass_terms(phi, P, R, rho0, orders, ccos, csin, bphi, bh, bw):  # noqa: ANN001, ANN201
-    """M11, M12, M22 and their phi-derivatives (module docstring), float or array phi."""
+def mass_from_curve(px, py, p1x, p1y, p2x, p2y, lam, lam1, P, R):  # noqa: ANN001, ANN202
+    """M11, M12, M22 and their phi-derivatives from the ball-centre curve's terms.
+
+    The one place the mass matrix is written (module docstring; with the frame's wobble
+    factor ``c = P[I_CW]``); :func:`mass_terms`, :func:`rigid_terms` and the diagnosis
+    residual all call it.
+    """
     m = P[I_M]
     jb = P[I_JB]
-    jf = P[I_JF]
     c = P[I_CW]
-    px, py, p1x, p1y, p2x, p2y, _, _, lam, lam1 = curve_terms(
-        phi, P, R, rho0, orders, ccos, csin, bphi, bh, bw)
     sig = lam / R
     sig1 = lam1 / R
-    m11 = m * (c * c * px * px + py * py) + jb + jf
+    m11 = m * (c * c * px * px + py * py) + jb + P[I_JF]
     m12 = c * (m * (px * p1y - py * p1x) - jb * sig)
     m22 = m * (p1x * p1x + p1y * p1y) + jb * sig * sig
     dm11 = 2.0 * m * (c * c * px * p1x + py * p1y)
     dm12 = c * (m * (px * p2y - py * p2x) - jb * sig1)
     dm22 = 2.0 * m * (p1x * p2x + p1y * p2y) + 2.0 * jb * sig * sig1
     return m11, m12, m22, dm11, dm12, dm22
+
+
+@njit
+def gravity_from_curve(st, ct, px, py, p1x, p1y, P):  # noqa: ANN001, ANN202
+    """G = dV/dq with ``V = m g (sin(theta) c p_x + cos(theta) p_y)`` (c: wobble factor)."""
+    mg = P[I_M] * P[I_G]
+    c = P[I_CW]
+    return mg * (ct * c * px - st * py), mg * (st * c * p1x + ct * p1y)
+
+
+@njit
+def mass_terms(phi, P, R, rho0, orders, ccos, csin, bphi, bh, bw):  # noqa: ANN001, ANN201
+    """M11, M12, M22 and their phi-derivatives (module docstring), float or array phi."""
+    px, py, p1x, p1y, p2x, p2y, _, _, lam, lam1 = curve_terms(
+        phi, P, R, rho0, orders, ccos, csin, bphi, bh, bw)
+    return mass_from_curve(px, py, p1x, p1y, p2x, p2y, lam, lam1, P, R)
 
 
 @njit
@@ -182,8 +200,6 @@ def rigid_terms(theta, phi, theta_dot, phi_dot, u, P, R, rho0, orders, ccos, csi
         ``k_u u theta_dot`` [W], dissipated power [W] (>= 0 while F_n >= 0), normal force [N].
     """
     m = P[I_M]
-    jb = P[I_JB]
-    jf = P[I_JF]
     g = P[I_G]
     c = P[I_CW]
     sw = P[I_SW]
@@ -191,21 +207,13 @@ def rigid_terms(theta, phi, theta_dot, phi_dot, u, P, R, rho0, orders, ccos, csi
         phi, P, R, rho0, orders, ccos, csin, bphi, bh, bw)
     st = np.sin(theta)
     ct = np.cos(theta)
-    # mass matrix and its derivative (same lines as mass_terms, kept inline for speed)
-    sig = lam / R
-    sig1 = lam1 / R
-    m11 = m * (c * c * px * px + py * py) + jb + jf
-    m12 = c * (m * (px * p1y - py * p1x) - jb * sig)
-    m22 = m * (p1x * p1x + p1y * p1y) + jb * sig * sig
-    dm11 = 2.0 * m * (c * c * px * p1x + py * p1y)
-    dm12 = c * (m * (px * p2y - py * p2x) - jb * sig1)
-    dm22 = 2.0 * m * (p1x * p2x + p1y * p2y) + 2.0 * jb * sig * sig1
+    m11, m12, m22, dm11, dm12, dm22 = mass_from_curve(px, py, p1x, p1y, p2x, p2y, lam, lam1,
+                                                      P, R)
     # Coriolis/centrifugal vector
     c1 = dm11 * theta_dot * phi_dot + dm12 * phi_dot * phi_dot
     c2 = -0.5 * dm11 * theta_dot * theta_dot + 0.5 * dm22 * phi_dot * phi_dot
     # gravity, V = m g (sin(theta) c p_x + cos(theta) p_y)
-    g1 = m * g * (ct * c * px - st * py)
-    g2 = m * g * (st * c * p1x + ct * p1y)
+    g1, g2 = gravity_from_curve(st, ct, px, py, p1x, p1y, P)
     # joint: motor gain, viscous and (smoothed) Coulomb friction
     sgn_th = np.tanh(theta_dot / P[I_VC])
     tau_f = P[I_CV] * theta_dot + P[I_TC] * sgn_th

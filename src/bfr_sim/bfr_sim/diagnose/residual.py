@@ -42,7 +42,22 @@ from numpy.typing import NDArray
 
 from bfr_sim._jit import njit
 from bfr_sim.diagnose.preprocess import Prepared, SensorCorrection
-from bfr_sim.dynamics import RigidModel, curve_terms
+from bfr_sim.dynamics import (
+    I_CV,
+    I_CW,
+    I_G,
+    I_KU,
+    I_M,
+    I_MUR,
+    I_SW,
+    I_TC,
+    I_VC,
+    I_VR,
+    RigidModel,
+    curve_terms,
+    gravity_from_curve,
+    mass_from_curve,
+)
 from bfr_sim.params import RigParams
 
 __all__ = ["Residual", "ResidualConfig", "ResidualEvaluator", "kernel_pair", "pointwise_terms"]
@@ -79,12 +94,10 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
     phi_o = np.empty(n)
     phid_o = np.empty(n)
     fn_o = np.empty(n)
-    m = P[0]
-    jb = P[1]
-    jf = P[2]
-    g = P[4]
-    cw = P[11]
-    sw = P[12]
+    m = P[I_M]
+    g = P[I_G]
+    cw = P[I_CW]
+    sw = P[I_SW]
     for i in range(n):
         th = theta[i]
         thd = theta_dot[i]
@@ -101,20 +114,13 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
                 break
             ph = ph - f / dpsi
         phd = psi_dot[i] / dpsi
-        # mass matrix and its phi-derivative (bfr_sim.dynamics.mass_terms)
-        sig = lam / R
-        sig1 = lam1 / R
-        m11 = m * (cw * cw * px * px + py * py) + jb + jf
-        m12 = cw * (m * (px * p1y - py * p1x) - jb * sig)
-        m22 = m * (p1x * p1x + p1y * p1y) + jb * sig * sig
-        dm11 = 2.0 * m * (cw * cw * px * p1x + py * p1y)
-        dm12 = cw * (m * (px * p2y - py * p2x) - jb * sig1)
-        dm22 = 2.0 * m * (p1x * p2x + p1y * p2y) + 2.0 * jb * sig * sig1
+        # mass matrix, its phi-derivative and gravity: the model's own kernels
+        m11, m12, m22, dm11, dm12, dm22 = mass_from_curve(px, py, p1x, p1y, p2x, p2y, lam,
+                                                          lam1, P, R)
         st = np.sin(th)
         ct = np.cos(th)
-        g1 = m * g * (ct * cw * px - st * py)
-        g2 = m * g * (st * cw * p1x + ct * p1y)
-        q1 = P[10] * u[i] - P[5] * thd - P[6] * np.tanh(thd / P[7])
+        g1, g2 = gravity_from_curve(st, ct, px, py, p1x, p1y, P)
+        q1 = P[I_KU] * u[i] - P[I_CV] * thd - P[I_TC] * np.tanh(thd / P[I_VC])
         # normal force n3 . m (r_dd + g y) (bfr_sim.dynamics.rigid_terms; the phi_dd term
         # vanishes for a round ball: n . p' = 0)
         thd2 = thd * thd
@@ -125,7 +131,7 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
         a0z = phd2 * sw * p2x
         fn = (m * (cw * nx * a0x + ny * a0y + sw * nx * a0z)
               + m * (-cw * nx * py + ny * cw * px) * theta_ddot[i])
-        q2 = -P[8] * lam * np.tanh(phd / P[9]) * fn
+        q2 = -P[I_MUR] * lam * np.tanh(phd / P[I_VR]) * fn
         dtdphi = 0.5 * (dm11 * thd2 + 2.0 * dm12 * thd * phd + dm22 * phd2)
         p1[i] = m11 * thd + m12 * phd
         p2[i] = m12 * thd + m22 * phd
