@@ -50,6 +50,8 @@ import numpy as np
 import yaml
 from numpy.typing import ArrayLike, NDArray
 
+from bfr_camera.param_file import load_ros_parameters
+
 __all__ = [
     "DISTORTION_MODELS",
     "CameraModel",
@@ -538,21 +540,7 @@ def default_camera_path() -> Path:
 def read_ros_parameters(path: str | Path | None = None) -> dict[str, Any]:
     """The ``ros__parameters`` mapping of a ROS 2 parameter file (default: camera.yaml)."""
     p = Path(path) if path is not None else default_camera_path()
-    try:
-        doc = yaml.safe_load(p.read_text())
-    except OSError as exc:
-        raise CameraModelError(f"cannot read {p}: {exc}") from exc
-    except yaml.YAMLError as exc:
-        raise CameraModelError(f"{p}: invalid YAML: {exc}") from exc
-    if not isinstance(doc, Mapping) or not doc:
-        raise CameraModelError(f"{p}: not a ROS 2 parameter file (expected a mapping)")
-    if "ros__parameters" in doc:
-        return dict(doc["ros__parameters"])
-    for node_name, body in doc.items():
-        if isinstance(body, Mapping) and "ros__parameters" in body:
-            return dict(body["ros__parameters"])
-        raise CameraModelError(f"{p}: node entry {node_name!r} has no ros__parameters")
-    raise CameraModelError(f"{p}: no ros__parameters section")
+    return load_ros_parameters(p, CameraModelError)
 
 
 def camera_from_dict(d: Mapping[str, Any]) -> CameraModel:

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+from bfr_camera.param_file import load_ros_parameters
 
 __all__ = [
     "ActuatorParams",
@@ -438,19 +439,6 @@ def default_params_path() -> Path:
     raise ParameterError(f"rig.yaml not found; looked in {[str(c) for c in candidates]}")
 
 
-def _ros_parameters(doc: Any, path: str) -> dict[str, Any]:
-    """Extract the ``ros__parameters`` mapping of a ROS 2 parameter file."""
-    if not isinstance(doc, Mapping) or not doc:
-        raise ParameterError(f"{path}: not a ROS 2 parameter file (expected a mapping)")
-    if "ros__parameters" in doc:
-        return dict(doc["ros__parameters"])
-    for node_name, body in doc.items():
-        if isinstance(body, Mapping) and "ros__parameters" in body:
-            return dict(body["ros__parameters"])
-        raise ParameterError(f"{path}: node entry {node_name!r} has no ros__parameters")
-    raise ParameterError(f"{path}: no ros__parameters section")
-
-
 def _group(d: Mapping[str, Any], name: str) -> dict[str, Any]:
     g = d.get(name, {})
     if not isinstance(g, Mapping):
@@ -535,16 +523,9 @@ def load_params(path: str | Path | None = None) -> RigParams:
         If the file is missing, is not a parameter file, or a value is invalid.
     """
     p = Path(path) if path is not None else default_params_path()
+    d = load_ros_parameters(p, ParameterError)
     try:
-        text = p.read_text()
-    except OSError as exc:
-        raise ParameterError(f"cannot read parameter file {p}: {exc}") from exc
-    try:
-        doc = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        raise ParameterError(f"{p}: invalid YAML: {exc}") from exc
-    try:
-        return params_from_dict(_ros_parameters(doc, str(p)))
+        return params_from_dict(d)
     except ParameterError as exc:
         raise ParameterError(f"{p}: {exc}") from exc
 
