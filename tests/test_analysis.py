@@ -7,14 +7,14 @@ import math
 
 import numpy as np
 import pytest
-from bfr_sim.analysis.bounce import bounce_along, classify, impact_energy, impact_momentum
-from bfr_sim.analysis.cli import main
-from bfr_sim.analysis.energy import energy_analysis, rigid_forces
-from bfr_sim.analysis.trajectory import Trajectory
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.params import load_params
-from bfr_sim.perturbations import load_study
-from bfr_sim.simulate import simulate
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import load_params
+from bfr_model.perturbations import load_study
+from bfr_model.simulate import simulate
+from bfr_tools.analysis.bounce import bounce_along, classify, impact_energy, impact_momentum
+from bfr_tools.analysis.cli import main
+from bfr_tools.analysis.energy import energy_analysis, rigid_forces
+from bfr_tools.analysis.trajectory import Trajectory
 
 P = load_params()
 STUDY = load_study()

@@ -14,7 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from bfr_sim.io.bag import (
+from bfr_model.io.bag import (
     BagError,
     BagWarning,
     BagWriter,
@@ -24,7 +24,7 @@ from bfr_sim.io.bag import (
     read_bag_messages,
     write_recording_bag,
 )
-from bfr_sim.recording import Recording
+from bfr_model.recording import Recording
 from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -59,9 +59,10 @@ def sim_like(n: int = 300) -> Recording:
                                               potential=np.linspace(0, 1e-3, n), info={}))
 
 
-def test_custom_msg_dirs_found_in_source_tree() -> None:
+def test_custom_msg_dirs_found() -> None:
+    """The installed share/bfr_interfaces/msg (or the source tree's) holds the definitions."""
     dirs = find_msg_dirs()
-    assert REPO / "src" / "bfr_interfaces" / "msg" in dirs
+    assert dirs and all((d / "BallObservation.msg").is_file() for d in dirs)
     store = make_typestore()
     for name in ("BallObservation", "ControllerState", "SimTruth"):
         assert f"bfr_interfaces/msg/{name}" in store.types
@@ -201,7 +202,7 @@ def test_writer_errors(tmp_path: Path) -> None:
 CHILD = textwrap.dedent("""
     import os, sys, time
     import numpy as np
-    from bfr_sim.io.bag import BagWriter
+    from bfr_model.io.bag import BagWriter
     mode, path = sys.argv[1], sys.argv[2]
     bag = BagWriter(path, chunk_size=4096, flush_interval=None)
     T = bag.typestore.types
@@ -234,7 +235,7 @@ CHILD = textwrap.dedent("""
 
 def child_env() -> dict[str, str]:
     env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join([str(REPO / "src" / "bfr_sim"),
+    env["PYTHONPATH"] = os.pathsep.join([str(REPO / "src" / "bfr_model"),
                                          env.get("PYTHONPATH", "")])
     return env
 

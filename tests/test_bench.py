@@ -13,17 +13,19 @@ import subprocess
 import sys
 
 import pytest
-from bfr_control.bench_common import Budget, Figure, FigureSpec, fmt_value, not_measured
-from bfr_control.cli import SUBCOMMANDS
+from bfr_tools.bench import camera as bench_camera
+from bfr_tools.bench import sim as bench_sim
+from bfr_tools.bench.common import Budget, Figure, FigureSpec, fmt_value, not_measured
+from bfr_tools.cli import SUBCOMMANDS
 
-from bfr_control import bench, bench_camera, bench_sim
+from bfr_tools import bench
 
 
 @pytest.fixture(scope="module")
 def quick_result() -> dict:
     """``bfr bench --quick --json --only sim,camera`` run once for the module."""
     proc = subprocess.run(
-        [sys.executable, "-m", "bfr_control.cli", "bench", "--quick", "--json", "--only",
+        [sys.executable, "-m", "bfr_tools.cli", "bench", "--quick", "--json", "--only",
          "sim,camera"], capture_output=True, text=True, timeout=300, check=False)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "[bench" in proc.stderr  # progress lines go to stderr
@@ -108,4 +110,4 @@ def test_help_and_bad_arguments() -> None:
 
 
 def test_registered_in_cli() -> None:
-    assert SUBCOMMANDS["bench"][:2] == ("bfr_control.bench", "main")
+    assert SUBCOMMANDS["bench"][:2] == ("bfr_tools.bench", "main")

@@ -10,10 +10,10 @@ import math
 
 import numpy as np
 import pytest
-from bfr_sim.diagnose.effects import EFFECT_NAMES
-from bfr_sim.params import load_params
+from bfr_diagnose.effects import EFFECT_NAMES
+from bfr_model.params import load_params
 
-from bfr_control import blindtest as bt
+from bfr_diagnose import blindtest as bt
 
 
 def test_draw_covers_every_effect_pairs_and_clean_controls() -> None:

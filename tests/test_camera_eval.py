@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from bfr_camera import evaluate
+from bfr_tools import camera_eval as evaluate
 
 
 def test_json_has_every_figure_with_its_target(capsys: pytest.CaptureFixture[str]) -> None:
@@ -52,7 +52,7 @@ def test_usage_errors() -> None:
 
 
 def test_registered_in_the_bfr_command_line() -> None:
-    from bfr_control.cli import SUBCOMMANDS, load_subcommand  # noqa: PLC0415
+    from bfr_tools.cli import SUBCOMMANDS, load_subcommand  # noqa: PLC0415
 
-    assert SUBCOMMANDS["camera-eval"][:2] == ("bfr_camera.evaluate", "main")
+    assert SUBCOMMANDS["camera-eval"][:2] == ("bfr_tools.camera_eval", "main")
     assert load_subcommand("camera-eval") is evaluate.main

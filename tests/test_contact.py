@@ -6,13 +6,13 @@ import math
 
 import numpy as np
 import pytest
-from bfr_sim.closest_point import (
+from bfr_model.closest_point import (
     closest_point,
     contour_data,
     seed_eq_4_36,
     taylor_closest_point,
 )
-from bfr_sim.contact import (
+from bfr_model.contact import (
     IWD,
     IWHC,
     IWIN,
@@ -20,10 +20,10 @@ from bfr_sim.contact import (
     damping_for_restitution,
     restitution,
 )
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.geometry import contour_kernel
-from bfr_sim.params import load_params
-from bfr_sim.simulate import simulate
+from bfr_model.dynamics import RigidModel
+from bfr_model.geometry import contour_kernel
+from bfr_model.params import load_params
+from bfr_model.simulate import simulate
 
 NOMINAL = load_params()
 ROUGH = NOMINAL.replace(**{"track.asperity_phi": [0.1, -0.12, 0.105],

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from bfr_control.closed_loop import SensorConfig, orbit_initial_state, run_closed_loop
 from bfr_control.constraint import VirtualConstraint
 from bfr_control.controller import (
     BALL_LOST,
@@ -18,8 +17,9 @@ from bfr_control.controller import (
 from bfr_control.estimator import BallObservation
 from bfr_control.orbit import PeriodicOrbit
 from bfr_control.riccati import compute_gains
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.params import load_params
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import load_params
+from bfr_sim.closed_loop import SensorConfig, orbit_initial_state, run_closed_loop
 
 NOMINAL = load_params()
 

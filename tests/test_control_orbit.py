@@ -10,8 +10,8 @@ from bfr_control.constraint import ConstraintSpec, VirtualConstraint, contour_pe
 from bfr_control.orbit import OrbitError, OrbitSpec, PeriodicOrbit, reduced_dynamics
 from bfr_control.periodic import PeriodicTable, periodic_integral
 from bfr_control.transverse import pfl_torque
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.params import load_params
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import load_params
 from scipy.integrate import solve_ivp
 
 NOMINAL = load_params()

@@ -13,8 +13,8 @@ from bfr_control.transverse import (
     transverse_linearization,
     y_ddot,
 )
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.params import load_params
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import load_params
 
 NOMINAL = load_params()
 LOSSY = NOMINAL.replace(**{"joint.viscous_friction": 3e-4, "joint.coulomb_friction": 2e-3,

@@ -15,8 +15,8 @@ from bfr_control.riccati import (
     monodromy,
 )
 from bfr_control.transverse import transverse_linearization
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.params import load_params
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import load_params
 
 NOMINAL = load_params()
 

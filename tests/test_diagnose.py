@@ -2,8 +2,9 @@
 bad inputs, bags (written by the recorder's writer, and by ``bfr simulate``), and the real
 rig's logs.
 
-Synthetic recordings come from :mod:`bfr_sim.diagnose.synth` (a stabilised rolling ball,
-camera noise 0.1 mm); every diagnosis uses the default noise-injection null, as a user's.
+Synthetic recordings come from :mod:`bfr_diagnose.synth` (the node suite's controller in
+closed loop, camera noise 0.1 mm); every diagnosis uses the default noise-injection null,
+as a user's.
 """
 
 from __future__ import annotations
@@ -17,11 +18,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bfr_sim.diagnose.api import DiagnoseOptions, diagnose_recording
-from bfr_sim.diagnose.effects import EFFECT_NAMES
-from bfr_sim.diagnose.synth import SynthConfig, stabilised_recording
-from bfr_sim.io.csv_io import write_csv
-from bfr_sim.params import RigParams, load_params
+from bfr_diagnose.api import DiagnoseOptions, diagnose_recording
+from bfr_diagnose.effects import EFFECT_NAMES
+from bfr_diagnose.synth import LogConventions, SynthConfig, stabilised_recording
+from bfr_model.io.csv_io import write_csv
+from bfr_model.params import RigParams, load_params
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "ntnu-rig"
@@ -55,6 +56,8 @@ def _rec(changes: dict, camera: float | dict, seed: int):  # noqa: ANN202
     base = RigParams()
     plant = base.replace(**changes) if changes else base
     cam = camera if isinstance(camera, dict) else {"camera_latency": camera}
+    if "camera_offset" in cam:
+        cam = {"log": LogConventions(camera_offset=cam["camera_offset"])}
     for k in range(4):
         rec = stabilised_recording(plant, base, SynthConfig(duration=DUR, **cam),
                                    np.random.default_rng(seed + 100 * k))
@@ -113,21 +116,22 @@ def test_pair_found_as_two() -> None:
 def _env() -> dict[str, str]:
     env = dict(os.environ)
     env["PYTHONPATH"] = os.pathsep.join([str(ROOT / "src" / p) for p in
-                                         ("bfr_sim", "bfr_camera", "bfr_control")]
+                                         ("bfr_model", "bfr_ros", "bfr_camera", "bfr_control",
+                                          "bfr_sim", "bfr_diagnose")]
                                         + [env.get("PYTHONPATH", "")])
     return env
 
 
 def _cli(*args: str) -> subprocess.CompletedProcess:
     """``bfr diagnose ARGS`` in a subprocess."""
-    return subprocess.run([sys.executable, "-m", "bfr_sim.diagnose.cli", *args],
+    return subprocess.run([sys.executable, "-m", "bfr_diagnose.cli", *args],
                           check=False, capture_output=True, text=True, env=_env(),
                           timeout=300)
 
 
 def _bfr(*args: str) -> subprocess.CompletedProcess:
     """``bfr ARGS`` (the project's command line) in a subprocess."""
-    return subprocess.run([sys.executable, "-m", "bfr_control.cli", *args], check=False,
+    return subprocess.run([sys.executable, "-m", "bfr_tools.cli", *args], check=False,
                           capture_output=True, text=True, env=_env(), timeout=300)
 
 
@@ -156,7 +160,7 @@ def test_cli_nan_csv(tmp_path: Path) -> None:
 
 
 def test_bag_written_by_recorder(tmp_path: Path) -> None:
-    bag = pytest.importorskip("bfr_sim.io.bag")
+    bag = pytest.importorskip("bfr_model.io.bag")
     rec = _rec({"joint.viscous_friction": 6e-4}, 0.0, 5)
     path = tmp_path / "run_bag"
     bag.write_recording_bag(path, rec)
@@ -176,7 +180,7 @@ def _record_like_the_recorder(path: Path, rec, latency: float) -> None:  # noqa:
     sensor_msgs = pytest.importorskip("sensor_msgs.msg", reason="sensor_msgs not installed")
     std_msgs = pytest.importorskip("std_msgs.msg", reason="std_msgs not installed")
     bfr_msgs = pytest.importorskip("bfr_interfaces.msg", reason="bfr_interfaces not built")
-    from bfr_sim.io.bag import BagWriter  # noqa: PLC0415
+    from bfr_model.io.bag import BagWriter  # noqa: PLC0415
 
     def stamp(msg, t: float) -> None:  # noqa: ANN001
         ns = round(t * 1e9)

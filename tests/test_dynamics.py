@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 import pytest
-from bfr_sim.dynamics import RigidModel, rigid_rhs
-from bfr_sim.integrators import rk4_steps, solve_adaptive
-from bfr_sim.params import load_params
-from bfr_sim.simulate import simulate
+from bfr_model.dynamics import RigidModel, rigid_rhs
+from bfr_model.integrators import rk4_steps, solve_adaptive
+from bfr_model.params import load_params
+from bfr_model.simulate import simulate
 from scipy.optimize import brentq
 
 NOMINAL = load_params()

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import sympy as sp
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.params import load_params
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import load_params
 
 
 def _derive(params):  # noqa: ANN001, ANN202

@@ -6,8 +6,8 @@ import math
 
 import numpy as np
 import pytest
-from bfr_sim.geometry import OffsetCurve
-from bfr_sim.params import ParameterError, RigParams, load_params, params_to_ros_yaml
+from bfr_model.geometry import OffsetCurve
+from bfr_model.params import ParameterError, RigParams, load_params, params_to_ros_yaml
 from scipy.integrate import quad
 
 NOMINAL = load_params()

@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 import rosutil
 from bfr_camera.calibration import load_camera
-from bfr_camera.node_common import IMAGE_QOS, STATE_QOS
-from bfr_sim.params import load_params
+from bfr_model.params import load_params
+from bfr_ros.node_common import IMAGE_QOS, STATE_QOS
 from bfr_sim.render import FrameRenderer, RenderOptions, rig_scene
 from sensor_msgs.msg import CameraInfo, Image, JointState
 

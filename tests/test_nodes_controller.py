@@ -1,6 +1,6 @@
 """The controller node alone, in its own process; the test plays the rig (plant + camera).
 
-The test steps the rigid model (bfr_sim.dynamics) itself and publishes ``/clock``,
+The test steps the rigid model (bfr_model.dynamics) itself and publishes ``/clock``,
 ``joint_states`` and ``ball_observation`` like the simulator and camera nodes, in lock-step
 with the node (after each camera frame it waits for the node's answer). Then it feeds bad
 input: a missing ball, NaN encoder samples, stale stamps, a dead encoder, and checks the
@@ -13,10 +13,10 @@ import math
 
 import numpy as np
 import rosutil
-from bfr_camera.node_common import COMMAND_QOS, STATE_QOS
-from bfr_control.rig import orbit_start
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.params import load_params
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import load_params
+from bfr_ros.node_common import COMMAND_QOS, STATE_QOS
+from bfr_tools.rig import orbit_start
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rosutil
-from bfr_camera.node_common import COMMAND_QOS, IMAGE_QOS, JOINT_STATES_QOS, STATE_QOS
+from bfr_ros.node_common import COMMAND_QOS, IMAGE_QOS, JOINT_STATES_QOS, STATE_QOS
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image, JointState

@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 from bfr_camera.camera_node import ThetaBuffer
 from bfr_camera.camera_node import node_defaults as camera_defaults
-from bfr_camera.node_common import _cast, flatten, image_to_array, unflatten
-from bfr_control.rig import orbit_start
-from bfr_sim.params import load_params
+from bfr_model.params import load_params
+from bfr_ros.node_common import _cast, flatten, image_to_array, unflatten
 from bfr_sim.simulator_node import RigSimulation, Schedule
 from bfr_sim.simulator_node import node_defaults as sim_defaults
+from bfr_tools.rig import orbit_start
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -190,7 +190,7 @@ def test_orbit_start_is_on_the_controller_orbit() -> None:
 
 
 def test_launch_file_names_existing_executables_and_files() -> None:
-    path = REPO / "src" / "bfr_control" / "launch" / "rig.launch.py"
+    path = REPO / "src" / "bfr_tools" / "launch" / "rig.launch.py"
     tree = ast.parse(path.read_text())
     strings = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant)
                and isinstance(n.value, str)}

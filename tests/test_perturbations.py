@@ -6,10 +6,10 @@ import math
 
 import numpy as np
 import pytest
-from bfr_sim.dynamics import RigidModel, curve_terms, rigid_rhs, rigid_terms
-from bfr_sim.integrators import rk4_steps, solve_adaptive
-from bfr_sim.params import ParameterError, load_params
-from bfr_sim.perturbations import (
+from bfr_model.dynamics import RigidModel, curve_terms, rigid_rhs, rigid_terms
+from bfr_model.integrators import rk4_steps, solve_adaptive
+from bfr_model.params import ParameterError, load_params
+from bfr_model.perturbations import (
     PERTURBATIONS,
     bump_row,
     hc_stiffness_from_linear,
@@ -19,7 +19,7 @@ from bfr_sim.perturbations import (
     with_asperities,
     write_params,
 )
-from bfr_sim.simulate import simulate
+from bfr_model.simulate import simulate
 
 NOMINAL = load_params()
 STUDY = load_study()

@@ -7,8 +7,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from bfr_sim.io.csv_io import CSV_COLUMNS, CsvFormatError, read_csv, write_csv
-from bfr_sim.recording import Recording
+from bfr_model.io.csv_io import CSV_COLUMNS, CsvFormatError, read_csv, write_csv
+from bfr_model.recording import Recording
 
 
 def rig_like(n: int = 300) -> Recording:

@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from bfr_sim.recording import Recording, RecordingError, ball_centre_angle
+from bfr_model.recording import Recording, RecordingError, ball_centre_angle
 
 
 def make_rec(n: int = 1000, rate: float = 1000.0, cam_every: int = 6, **over: object) -> Recording:

@@ -1,6 +1,6 @@
 """The whole rig: simulator, camera, controller and recorder in four processes over DDS.
 
-Run by ``bfr rig`` (bfr_control.rig) exactly as a user runs it, in lock-step so that the
+Run by ``bfr rig`` (bfr_tools.rig) exactly as a user runs it, in lock-step so that the
 outcome does not depend on the machine's load. The ball must keep rolling for at least 30 s
 of simulated time, and the bag must hold the contract's topics at the contract's rates.
 """
@@ -10,8 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from bfr_control.rig import _parser, format_summary, run_rig
-from bfr_sim.io.bag import read_bag
+from bfr_model.io.bag import read_bag
+from bfr_tools.rig import _parser, format_summary, run_rig
 
 DURATION = 32.0
 
@@ -75,7 +75,7 @@ def test_bag_holds_the_contract_topics_at_their_rates(run: tuple[dict, Path]) ->
 
 def test_rig_names_a_node_that_dies_early(tmp_path: Path,
                                           capsys: pytest.CaptureFixture[str]) -> None:
-    from bfr_control.rig import main  # noqa: PLC0415
+    from bfr_tools.rig import main  # noqa: PLC0415
 
     status = main(["--duration", "5", "--log-dir", str(tmp_path / "logs"), "--no-record",
                    "-p", "camera:ball.radius:=-1.0", "--wall-timeout", "120"])

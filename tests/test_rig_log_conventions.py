@@ -1,7 +1,7 @@
 """The inferred conventions of the NTNU rig logs, checked on the real files.
 
 Numbers and reasoning: docs/ntnu-rig-conventions.md (printed by
-``python -m bfr_sim.io.rig_conventions``).
+``python -m bfr_model.io.rig_conventions``).
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bfr_sim.io.rig_conventions import (
+from bfr_model.io.rig_conventions import (
     ball_radius_fit,
     derivative_delay,
     fix_statistics,
@@ -20,7 +20,7 @@ from bfr_sim.io.rig_conventions import (
     phi_theta_lag,
     rolling_direction,
 )
-from bfr_sim.io.rig_log import RigLog, parse_rig_log
+from bfr_model.io.rig_log import RigLog, parse_rig_log
 
 DATA = Path(os.environ.get("BFR_RIG_DATA", Path(__file__).resolve().parents[1].parent
                            / "shared" / "data" / "ntnu-rig"))

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bfr_sim.io.rig_log import (
+from bfr_model.io.rig_log import (
     RigLogError,
     RigLogWarning,
     parse_rig_log,

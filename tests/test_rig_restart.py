@@ -12,8 +12,8 @@ import signal
 
 import pytest
 import rosutil
-from bfr_camera.node_common import STATE_QOS
-from bfr_control.rig import orbit_start
+from bfr_ros.node_common import STATE_QOS
+from bfr_tools.rig import orbit_start
 
 from bfr_interfaces.msg import ControllerState, SimTruth
 

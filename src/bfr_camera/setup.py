@@ -13,12 +13,13 @@ package_name = "bfr_camera"
 
 setup(
     name=package_name,
-    version="0.1.0",
+    version="0.2.0",
     packages=find_packages(exclude=["test", "test.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", sorted(glob("config/*.yaml"))),
+        ("share/" + package_name + "/config",
+         sorted(glob("config/*.yaml") + glob("config/*.json"))),
         ("share/" + package_name + "/launch", sorted(glob("launch/*.py") + glob("launch/*.xml"))),
         # Keep lib/<package>/ present even before the package registers an executable.
         ("lib/" + package_name, []),
@@ -28,8 +29,8 @@ setup(
     maintainer="bfr developers",
     maintainer_email="bfr@example.org",
     description=(
-        "Camera model, calibration, ball detector and camera node of the bfr Butterfly "
-        "robot node suite."
+        "Camera model and calibration, the ball detector and the camera node of the bfr "
+        "Butterfly robot node suite."
     ),
     license="Apache-2.0",
     entry_points={

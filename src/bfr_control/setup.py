@@ -13,12 +13,13 @@ package_name = "bfr_control"
 
 setup(
     name=package_name,
-    version="0.1.0",
+    version="0.2.0",
     packages=find_packages(exclude=["test", "test.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", sorted(glob("config/*.yaml"))),
+        ("share/" + package_name + "/config",
+         sorted(glob("config/*.yaml") + glob("config/*.json"))),
         ("share/" + package_name + "/launch", sorted(glob("launch/*.py") + glob("launch/*.xml"))),
         # Keep lib/<package>/ present even before the package registers an executable.
         ("lib/" + package_name, []),
@@ -28,13 +29,14 @@ setup(
     maintainer="bfr developers",
     maintainer_email="bfr@example.org",
     description=(
-        "Controller law, closed-loop harness, controller node and the bfr command line of "
-        "the bfr Butterfly robot node suite."
+        "Orbital stabilisation controller of the Butterfly robot (virtual constraint, orbit, "
+        "transverse linearisation, periodic Riccati gains, estimator, supervisor) and the "
+        "controller node."
     ),
     license="Apache-2.0",
     entry_points={
         "console_scripts": [
-            "bfr = bfr_control.cli:main",
+            # "<executable> = bfr_control.<module>:main",  -> lib/bfr_control/<executable>
             "controller_node = bfr_control.controller_node:main",
         ],
     },

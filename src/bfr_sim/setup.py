@@ -13,12 +13,13 @@ package_name = "bfr_sim"
 
 setup(
     name=package_name,
-    version="0.1.0",
+    version="0.2.0",
     packages=find_packages(exclude=["test", "test.*"]),
     data_files=[
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
-        ("share/" + package_name + "/config", sorted(glob("config/*.yaml"))),
+        ("share/" + package_name + "/config",
+         sorted(glob("config/*.yaml") + glob("config/*.json"))),
         ("share/" + package_name + "/launch", sorted(glob("launch/*.py") + glob("launch/*.xml"))),
         # Keep lib/<package>/ present even before the package registers an executable.
         ("lib/" + package_name, []),
@@ -28,8 +29,8 @@ setup(
     maintainer="bfr developers",
     maintainer_email="bfr@example.org",
     description=(
-        "Physics model, integrators, renderer, recordings I/O, diagnosis core, simulator "
-        "and recorder nodes of the bfr Butterfly robot node suite."
+        "The emulated rig: renderer of the camera's frames, closed-loop harness (model, "
+        "sensors and the real controller offline), simulator and recorder nodes."
     ),
     license="Apache-2.0",
     entry_points={

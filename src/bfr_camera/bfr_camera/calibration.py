@@ -48,9 +48,8 @@ from typing import Any
 import cv2
 import numpy as np
 import yaml
+from bfr_model.param_file import config_path, load_ros_parameters
 from numpy.typing import ArrayLike, NDArray
-
-from bfr_camera.param_file import load_ros_parameters
 
 __all__ = [
     "DISTORTION_MODELS",
@@ -521,20 +520,8 @@ class CameraModel:
 # Parameter files
 # --------------------------------------------------------------------------------------------
 def default_camera_path() -> Path:
-    """Path of the shipped ``camera.yaml`` (installed share folder or the source tree)."""
-    here = Path(__file__).resolve().parent
-    candidates = [here.parent / "config" / "camera.yaml"]
-    try:
-        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
-
-        candidates.append(Path(get_package_share_directory("bfr_camera")) / "config"
-                          / "camera.yaml")
-    except Exception:  # noqa: BLE001 (not installed as an ament package: source tree only)
-        pass
-    for c in candidates:
-        if c.is_file():
-            return c
-    raise CameraModelError(f"camera.yaml not found; looked in {[str(c) for c in candidates]}")
+    """Path of the shipped ``camera.yaml`` (bfr_camera's ``config/``)."""
+    return config_path("bfr_camera", "camera.yaml")
 
 
 def read_ros_parameters(path: str | Path | None = None) -> dict[str, Any]:

@@ -26,9 +26,21 @@ import bisect
 import math
 import time
 from collections import deque
-from pathlib import Path
 from typing import Any
 
+from bfr_model.param_file import config_path
+from bfr_model.params import default_params_path
+from bfr_ros.node_common import (
+    IMAGE_QOS,
+    JOINT_STATES_QOS,
+    STATE_QOS,
+    declare_parameter_tree,
+    image_to_array,
+    load_yaml_parameters,
+    read_parameter_tree,
+    run_node,
+    stamp_to_ns,
+)
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -40,55 +52,18 @@ from bfr_camera.calibration import (
     default_camera_path,
 )
 from bfr_camera.detector import BallDetector, DetectionStatus, detector_config_from_dict
-from bfr_camera.node_common import (
-    IMAGE_QOS,
-    JOINT_STATES_QOS,
-    STATE_QOS,
-    declare_parameter_tree,
-    image_to_array,
-    load_yaml_parameters,
-    read_parameter_tree,
-    run_node,
-    stamp_to_ns,
-)
 from bfr_interfaces.msg import BallObservation
 
-__all__ = ["CameraNode", "ThetaBuffer", "main", "node_defaults", "rig_yaml_path"]
+__all__ = ["CameraNode", "ThetaBuffer", "main", "node_defaults"]
 
 _NS = 1_000_000_000
 
 
-def _config(package: str, name: str, source: Path) -> Path | None:
-    """``share/<package>/config/<name>`` of the installed package, else the source file."""
-    try:
-        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
-
-        p = Path(get_package_share_directory(package)) / "config" / name
-        if p.is_file():
-            return p
-    except Exception:  # noqa: BLE001 - not installed: the source tree
-        pass
-    return source if source.is_file() else None
-
-
-def rig_yaml_path() -> Path | None:
-    """bfr_sim's rig.yaml (for ``ball.radius``), found at run time without importing bfr_sim."""
-    src = Path(__file__).resolve().parents[2] / "bfr_sim" / "config" / "rig.yaml"
-    return _config("bfr_sim", "rig.yaml", src)
-
-
 def node_defaults() -> dict[str, Any]:
     """Defaults: camera.yaml (camera.*, detector.*), ball.radius of rig.yaml, this node's file."""
-    here = Path(__file__).resolve().parent.parent / "config"
     d = dict(load_yaml_parameters(default_camera_path()))
-    rig = rig_yaml_path()
-    radius = 0.0  # unknown: must then be given (-p ball.radius:=... or rig.yaml)
-    if rig is not None:
-        radius = float(load_yaml_parameters(rig)["ball"]["radius"])
-    d["ball"] = {"radius": radius}
-    node_file = _config("bfr_camera", "camera_node.yaml", here / "camera_node.yaml")
-    if node_file is not None:
-        d.update(load_yaml_parameters(node_file))
+    d["ball"] = {"radius": float(load_yaml_parameters(default_params_path())["ball"]["radius"])}
+    d.update(load_yaml_parameters(config_path("bfr_camera", "camera_node.yaml")))
     return d
 
 
@@ -158,7 +133,7 @@ class CameraNode(Node):
             what = "is unknown" if self.ball_radius == 0 else \
                 f"must be > 0 m, got {self.ball_radius}"
             raise ValueError(f"ball.radius {what}: pass --params-file "
-                             "<bfr_sim>/config/rig.yaml or -p ball.radius:=<m>")
+                             "<bfr_model>/config/rig.yaml or -p ball.radius:=<m>")
         self.detector = BallDetector(self.camera, self.ball_radius, self.detector_config)
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])

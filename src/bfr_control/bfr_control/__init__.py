@@ -1,5 +1,6 @@
-"""Control side of bfr.
+"""The orbital stabilisation controller of bfr.
 
-Controller law, closed-loop harness, controller node and the ``bfr`` command line of the bfr
-Butterfly robot node suite.
+Virtual constraint, periodic orbit, transverse linearisation, periodic Riccati gains,
+estimator and supervisor (pure numpy, :mod:`bfr_control.controller`), and the thin controller
+node (:mod:`bfr_control.controller_node`).
 """

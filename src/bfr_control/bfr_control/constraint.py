@@ -11,7 +11,7 @@ frame coordinates and world = Rot(theta) frame. The unit tangent ``t(phi) = delt
 (direction of increasing phi, i.e. of the ball's motion) has the frame-coordinate angle
 ``alpha_t(phi)`` (from +x, counter-clockwise): ``alpha_t(0) = 0`` and, since phi runs
 clockwise, ``alpha_t`` decreases by 2 pi per turn. Frenet for this orientation gives
-``t' = -K n`` (bfr_sim.geometry), so
+``t' = -K n`` (bfr_model.geometry), so
 
     alpha_t' = -K,    alpha_t'' = -K',    K = kappa |delta'|,
 
@@ -44,8 +44,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.geometry import offset_kernel
+from bfr_model.dynamics import RigidModel
+from bfr_model.geometry import offset_kernel
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["ConstraintSpec", "VirtualConstraint", "contour_period"]

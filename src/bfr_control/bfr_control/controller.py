@@ -10,7 +10,8 @@ latest camera fix:
 3. ``w = K(phi) [I, y, y_dot]`` with the periodic Riccati gains (bfr_control.riccati);
 4. ``u = PFL(w)``, the torque that makes ``y_ddot = w`` on the controller's model (seed
    eq. 4.46), plus an optional friction feed-forward ``c_v theta_dot + T_c tanh(theta_dot /
-   v_s)``, clamped to +-torque_limit (the unclamped value is reported).
+   v_s)``, clamped to the actuator's +-torque_limit (rig.yaml; the unclamped value is
+   reported).
 
 A supervisor (state machine) decides whether to apply it:
 
@@ -24,7 +25,7 @@ A supervisor (state machine) decides whether to apply it:
 
 Configuration: ``config/controller.yaml`` (ROS 2 parameter-file format, also the controller
 node's parameter file), loaded by :func:`load_controller_config`. The physics comes from the
-controller's own :class:`bfr_sim.params.RigParams` (its nominal model), separate from the
+controller's own :class:`bfr_model.params.RigParams` (its nominal model), separate from the
 plant's.
 """
 
@@ -37,9 +38,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
-from bfr_sim.dynamics import RigidModel
-from bfr_sim.params import RigParams
+from bfr_model.dynamics import RigidModel
+from bfr_model.param_file import ParameterError, config_path, load_ros_parameters
+from bfr_model.params import RigParams
 
 from bfr_control.constraint import ConstraintSpec, VirtualConstraint
 from bfr_control.estimator import BallEstimator, BallObservation, EstimatorConfig
@@ -74,8 +75,6 @@ class ControlConfig:
     ----------
     rate : float
         Control rate [Hz] (the closed-loop harness's default).
-    torque_limit : float
-        Clamp on the commanded torque [N m].
     friction_viscous : float
         Feed-forward viscous coefficient c_v [N m s/rad].
     friction_coulomb : float
@@ -85,13 +84,12 @@ class ControlConfig:
     """
 
     rate: float = 1000.0
-    torque_limit: float = 0.1
     friction_viscous: float = 0.0
     friction_coulomb: float = 0.0
     friction_smoothing: float = 0.05
 
     def __post_init__(self) -> None:
-        for name in ("rate", "torque_limit", "friction_smoothing"):
+        for name in ("rate", "friction_smoothing"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0.0):
                 raise ValueError(f"control.{name} must be > 0, got {v}")
@@ -189,46 +187,21 @@ class ControllerConfig:
 
 
 def default_config_path() -> Path:
-    """Path of the shipped controller.yaml (installed share folder or source tree)."""
-    here = Path(__file__).resolve().parent
-    candidates = [here.parent / "config" / "controller.yaml"]
-    try:
-        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
-
-        candidates.append(Path(get_package_share_directory("bfr_control")) / "config"
-                          / "controller.yaml")
-    except Exception:  # noqa: BLE001 (not installed as an ament package)
-        pass
-    for c in candidates:
-        if c.is_file():
-            return c
-    raise FileNotFoundError(f"controller.yaml not found; looked in {[str(c) for c in candidates]}")
+    """Path of the shipped controller.yaml (bfr_control's ``config/``)."""
+    return config_path("bfr_control", "controller.yaml")
 
 
 def load_controller_config(path: str | Path | None = None) -> ControllerConfig:
     """Load controller.yaml (ROS 2 parameter-file format; default: the shipped file)."""
     p = Path(path) if path is not None else default_config_path()
-    try:
-        doc = yaml.safe_load(p.read_text())
-    except (OSError, yaml.YAMLError) as exc:
-        raise ValueError(f"cannot read controller config {p}: {exc}") from exc
-    if not isinstance(doc, Mapping):
-        raise ValueError(f"{p}: not a ROS 2 parameter file")
-    body = doc.get("ros__parameters")
-    if body is None:
-        for v in doc.values():
-            if isinstance(v, Mapping) and "ros__parameters" in v:
-                body = v["ros__parameters"]
-                break
-    if not isinstance(body, Mapping):
-        raise ValueError(f"{p}: no ros__parameters section")
+    body = load_ros_parameters(p)
     try:
         return ControllerConfig.from_dict(body)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"{p}: {exc}") from exc
+        raise ParameterError(f"{p}: {exc}") from exc
 
 
-@dataclass(slots=True)
+@dataclass(frozen=True, slots=True, kw_only=True)
 class Command:
     """Output of one control step.
 
@@ -236,37 +209,38 @@ class Command:
     ----------
     t : float
         Time of the step [s].
-    torque : float
-        Commanded (clamped) torque [N m].
-    torque_unsat : float
-        Torque before the clamp [N m] (0 when not rolling).
     mode : str
         WAITING, ROLLING or BALL_LOST.
     reason : str
         Why the supervisor is in this mode (empty while rolling normally).
+    torque : float
+        Commanded (clamped) torque [N m]; 0 unless ROLLING.
+    torque_unsat : float
+        Torque before the clamp [N m] (0 when not rolling).
     phi, phi_dot : float
         Estimated contact angle [rad] and rate [rad/s] (NaN before the first fix).
     I, y, y_dot, z : float
-        Transverse coordinates from the estimate [rad^2/s^2, rad, rad/s, rad/s].
+        Transverse coordinates from the estimate [rad^2/s^2, rad, rad/s, rad/s] (NaN when
+        there is no estimate).
     w : float
-        Commanded y_ddot [rad/s^2].
+        Commanded y_ddot [rad/s^2] (0 when not rolling).
     new_fix : bool
         A valid camera fix was fused in this step.
     """
 
     t: float
-    torque: float
-    torque_unsat: float
     mode: str
     reason: str
-    phi: float
-    phi_dot: float
-    I: float  # noqa: E741 (the integral-of-motion deviation of the literature)
-    y: float
-    y_dot: float
-    z: float
-    w: float
-    new_fix: bool
+    torque: float = 0.0
+    torque_unsat: float = 0.0
+    phi: float = math.nan
+    phi_dot: float = math.nan
+    I: float = math.nan  # noqa: E741 (the integral-of-motion deviation of the literature)
+    y: float = math.nan
+    y_dot: float = math.nan
+    z: float = math.nan
+    w: float = 0.0
+    new_fix: bool = False
 
 
 class OrbitalController:
@@ -287,6 +261,8 @@ class OrbitalController:
     def __init__(self, params: RigParams, config: ControllerConfig | None = None,
                  use_cache: bool = True, gains: GainTable | None = None) -> None:
         self.params = params
+        #: The actuator's clamp on the command [N m] (``actuator.torque_limit``, rig.yaml).
+        self.torque_limit = params.actuator.torque_limit
         self.config = config if config is not None else load_controller_config()
         self.model = RigidModel(params)
         self.constraint = VirtualConstraint(self.model, self.config.constraint)
@@ -339,8 +315,8 @@ class OrbitalController:
         if not (math.isfinite(t) and math.isfinite(theta) and math.isfinite(theta_dot)):
             if self.mode == ROLLING:
                 self._lose(t, "non-finite encoder sample")
-            return Command(t, 0.0, 0.0, self.mode, self.reason, est.phi, est.phi_dot,
-                           math.nan, math.nan, math.nan, math.nan, 0.0, False)
+            return Command(t=t, mode=self.mode, reason=self.reason, phi=est.phi,
+                           phi_dot=est.phi_dot)
         est.record(t, theta, theta_dot)
         new_fix = False
         if ball is not None:
@@ -349,8 +325,8 @@ class OrbitalController:
                     new_fix = True
         phi, phi_dot = est.phi, est.phi_dot
         if not est.initialized:
-            return Command(t, 0.0, 0.0, self.mode, self.reason, phi, phi_dot,
-                           math.nan, math.nan, math.nan, math.nan, 0.0, new_fix)
+            return Command(t=t, mode=self.mode, reason=self.reason, phi=phi, phi_dot=phi_dot,
+                           new_fix=new_fix)
         th0, th1, th2, Y, k_i, k_y, k_yd = self._tab(phi).tolist()
         y = theta - th0
         y_dot = theta_dot - th1 * phi_dot
@@ -361,8 +337,7 @@ class OrbitalController:
             if since_fix > sup.lost_timeout:
                 est.reset()  # the ball went away before we locked on
                 self.reason = "ball seen, then lost again before acquisition"
-                return Command(t, 0.0, 0.0, self.mode, self.reason, math.nan, math.nan,
-                               math.nan, math.nan, math.nan, math.nan, 0.0, new_fix)
+                return Command(t=t, mode=self.mode, reason=self.reason, new_fix=new_fix)
             if est.frames < sup.acquire_frames:
                 self.reason = f"acquiring the ball ({est.frames}/{sup.acquire_frames} fixes)"
             elif phi_dot < sup.min_phi_dot or abs(y) > sup.max_abs_y or abs(z) > sup.max_abs_z:
@@ -384,17 +359,18 @@ class OrbitalController:
                 self._lose(t, f"ball speed {z:.3g} rad/s off the orbit "
                               f"(max {sup.max_abs_z} rad/s)")
         if self.mode != ROLLING:
-            return Command(t, 0.0, 0.0, self.mode, self.reason, phi, phi_dot, I_dev, y, y_dot,
-                           z, 0.0, new_fix)
+            return Command(t=t, mode=self.mode, reason=self.reason, phi=phi, phi_dot=phi_dot,
+                           I=I_dev, y=y, y_dot=y_dot, z=z, new_fix=new_fix)
         w = k_i * I_dev + k_y * y + k_yd * y_dot
         u = pfl_kernel(theta, phi, theta_dot, phi_dot, th1, th2, w, *self._args)
         if ctl.friction_viscous or ctl.friction_coulomb:
             u += (ctl.friction_viscous * theta_dot
                   + ctl.friction_coulomb * math.tanh(theta_dot / ctl.friction_smoothing))
-        lim = ctl.torque_limit
+        lim = self.torque_limit
         u_sat = lim if u > lim else (-lim if u < -lim else u)
-        return Command(t, u_sat, u, self.mode, self.reason, phi, phi_dot, I_dev, y, y_dot, z, w,
-                       new_fix)
+        return Command(t=t, mode=self.mode, reason=self.reason, torque=u_sat, torque_unsat=u,
+                       phi=phi, phi_dot=phi_dot, I=I_dev, y=y, y_dot=y_dot, z=z, w=w,
+                       new_fix=new_fix)
 
     def orbit_state(self, phi: float) -> np.ndarray:
         """State ``[theta, phi, theta_dot, phi_dot]`` on the controller's orbit at phi."""

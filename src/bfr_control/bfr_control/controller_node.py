@@ -15,7 +15,8 @@ samples between steps still go into the estimator's history (latency compensatio
 
 Safety, in the node whatever the core does:
 
-- the torque is clamped to ``control.torque_limit`` and is exactly 0 unless the mode is
+- the torque is clamped to the actuator's ``actuator.torque_limit`` (rig.yaml, the one
+  source: ``-p actuator.torque_limit:=0.05`` lowers it) and is exactly 0 unless the mode is
   ROLLING (WAITING, BALL_LOST and FAULT all command zero);
 - BALL_LOST (no valid fix for ``supervisor.lost_timeout``, the ball stopped or far from the
   orbit) is latched: zero torque until the node is restarted or ``~/reset`` is called;
@@ -39,7 +40,9 @@ import math
 import time
 from typing import Any
 
-from bfr_camera.node_common import (
+from bfr_model.param_file import config_path
+from bfr_model.params import default_params_path, params_from_dict
+from bfr_ros.node_common import (
     COMMAND_QOS,
     JOINT_STATES_QOS,
     STATE_QOS,
@@ -49,7 +52,6 @@ from bfr_camera.node_common import (
     run_node,
     stamp_to_ns,
 )
-from bfr_sim.params import default_params_path, params_from_dict
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -82,8 +84,7 @@ def node_defaults() -> dict[str, Any]:
     """Defaults: rig.yaml (the model), controller.yaml, controller_node.yaml."""
     d = dict(load_yaml_parameters(default_params_path()))
     d.update(load_yaml_parameters(default_config_path()))
-    node_file = default_config_path().parent / "controller_node.yaml"
-    d.update(load_yaml_parameters(node_file))
+    d.update(load_yaml_parameters(config_path("bfr_control", "controller_node.yaml")))
     return d
 
 
@@ -111,7 +112,7 @@ class ControllerNode(Node):
         self.watchdog_timeout = float(safety["watchdog_timeout"])
         self.max_age_ns = round(float(safety["max_stamp_age"]) * _NS)
         self.acquire_timeout = float(safety["acquire_timeout"])
-        self.limit = config.control.torque_limit
+        self.limit = self.ctrl.torque_limit
         self.cmd_pub = self.create_publisher(Float64MultiArray, "effort_controller/commands",
                                              COMMAND_QOS)
         self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
@@ -250,8 +251,8 @@ class ControllerNode(Node):
         cmd = self.ctrl.step(t, theta, theta_dot, due or None)
         self.last_step_ns = t_ns
         self.stats["steps"] += 1
+        # the core clamps to the actuator's limit; the node only refuses a non-finite value
         torque = cmd.torque if (cmd.mode == ROLLING and math.isfinite(cmd.torque)) else 0.0
-        torque = min(max(torque, -self.limit), self.limit)
         mode = MODE_CODES[cmd.mode]
         reason = cmd.reason
         # a ball seen but staying off the orbit is reported lost (the core keeps watching)

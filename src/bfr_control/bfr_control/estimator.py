@@ -8,7 +8,7 @@ Measurement. The ball-centre angle, clockwise from the frame's +y axis (the rig'
 ``phi``), is ``psi = theta(t_exp) + atan2(x, y)`` (world = Rot(theta) frame, DEVELOPERS.md), with
 theta at the exposure time interpolated from the encoder history (cubic Hermite in theta,
 theta_dot). The contact angle is ``phi = phi_of_psi(psi)``, the inverse of
-``bfr_sim.geometry.OffsetCurve.ball_angle``, tabulated once. Its noise, for a camera noise
+``bfr_model.geometry.OffsetCurve.ball_angle``, tabulated once. Its noise, for a camera noise
 sigma [m] per axis, is ``sigma / |p(phi)| * dphi/dpsi`` [rad].
 
 Process model. The passive row of the model, ``M21 theta_ddot + M22 phi_ddot + c2 + G2 = Q2``,
@@ -39,9 +39,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from bfr_sim._jit import njit
-from bfr_sim.dynamics import RigidModel, rigid_terms
-from bfr_sim.geometry import offset_kernel
+from bfr_model.dynamics import RigidModel, rigid_terms
+from bfr_model.geometry import offset_kernel
+from bfr_model.jit import njit
 
 from bfr_control.orbit import PeriodicOrbit
 from bfr_control.periodic import PeriodicTable

@@ -1,6 +1,6 @@
 """Reduced dynamics on the virtual constraint and the periodic orbit phi_dot*(phi).
 
-The rigid model (bfr_sim.dynamics) reads ``M(phi) q_ddot + c(q, q_dot) + G(q) = [u, 0]`` with
+The rigid model (bfr_model.dynamics) reads ``M(phi) q_ddot + c(q, q_dot) + G(q) = [u, 0]`` with
 ``c = [M11' th' ph' + M12' ph'^2, -1/2 M11' th'^2 + 1/2 M22' ph'^2]``. On the constraint
 ``theta = Theta(phi)``: ``theta_dot = Theta' phi_dot``, ``theta_ddot = Theta' phi_ddot +
 Theta'' phi_dot^2``, and the passive (second) row becomes the reduced dynamics
@@ -40,7 +40,7 @@ import math
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from bfr_sim.dynamics import RigidModel, mass_terms, rigid_terms
+from bfr_model.dynamics import RigidModel, mass_terms, rigid_terms
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq
 

@@ -21,7 +21,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from bfr_sim._jit import njit
+from bfr_model.jit import njit
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["PeriodicTable", "periodic_integral", "spectral_derivative"]

@@ -41,7 +41,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
-from bfr_sim.params import params_to_dict
+from bfr_model.params import params_to_dict
 from numpy.typing import NDArray
 from scipy.linalg import solve_continuous_are
 

@@ -47,8 +47,9 @@ still cancels it exactly when the controller's model has it).
 from __future__ import annotations
 
 import numpy as np
-from bfr_sim._jit import njit
-from bfr_sim.dynamics import I_CV, I_KU, I_TC, I_VC, RigidModel, mass_terms, rigid_terms
+from bfr_model.dynamics import RigidModel, mass_terms, rigid_terms
+from bfr_model.jit import njit
+from bfr_model.layout import I_CV, I_KU, I_TC, I_VC
 from numpy.typing import ArrayLike, NDArray
 
 from bfr_control.orbit import PeriodicOrbit

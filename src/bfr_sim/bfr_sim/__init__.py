@@ -1,5 +1,6 @@
-"""Simulator side of bfr.
+"""The emulated rig of bfr.
 
-Physics model, integrators, renderer, recordings I/O, diagnosis core, simulator and recorder
-nodes of the bfr Butterfly robot node suite (pure-numpy core, thin node modules).
+The renderer of the camera's frames (:mod:`bfr_sim.render`), the closed-loop harness that
+runs the model, the sensor models and the real controller offline
+(:mod:`bfr_sim.closed_loop`, ``bfr simulate``), and the simulator and recorder nodes.
 """

@@ -1,9 +1,9 @@
 """The recorder node: a ROS 2 bag (MCAP) of the rig's topics, readable by ``ros2 bag``.
 
 Generic: for each topic of ``recorder.topics`` it makes a raw (serialized) subscription and
-hands the CDR bytes to :class:`bfr_sim.io.bag.BagWriter`, which writes a rosbag2 directory
+hands the CDR bytes to :class:`bfr_model.io.bag.BagWriter`, which writes a rosbag2 directory
 (``metadata.yaml`` + one ``.mcap``; schemas ``ros2msg``, the project's own types included)
-that ``ros2 bag info/play``, Foxglove and :func:`bfr_sim.io.bag.read_bag` (``bfr diagnose``)
+that ``ros2 bag info/play``, Foxglove and :func:`bfr_model.io.bag.read_bag` (``bfr diagnose``)
 read. The types of the topic contract are known in advance; any other topic's type is
 looked up in the ROS graph until a publisher appears.
 
@@ -24,7 +24,9 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from bfr_camera.node_common import (
+from bfr_model.io.bag import BagWriter
+from bfr_model.param_file import config_path
+from bfr_ros.node_common import (
     declare_parameter_tree,
     load_yaml_parameters,
     read_parameter_tree,
@@ -32,8 +34,6 @@ from bfr_camera.node_common import (
 )
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-
-from bfr_sim.io.bag import BagWriter
 
 __all__ = ["CONTRACT_TYPES", "RecorderNode", "main", "node_defaults"]
 
@@ -51,17 +51,8 @@ CONTRACT_TYPES: dict[str, str] = {
 
 
 def node_defaults() -> dict[str, Any]:
-    """Defaults from recorder_node.yaml (installed share folder or source tree)."""
-    src = Path(__file__).resolve().parent.parent / "config" / "recorder_node.yaml"
-    try:
-        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
-
-        inst = Path(get_package_share_directory("bfr_sim")) / "config" / "recorder_node.yaml"
-        if inst.is_file():
-            src = inst
-    except Exception:  # noqa: BLE001 - not installed: the source tree
-        pass
-    return dict(load_yaml_parameters(src))
+    """Defaults from recorder_node.yaml (bfr_sim's ``config/``)."""
+    return dict(load_yaml_parameters(config_path("bfr_sim", "recorder_node.yaml")))
 
 
 def message_class(type_name: str) -> type:

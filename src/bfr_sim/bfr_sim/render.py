@@ -50,6 +50,8 @@ from typing import Any
 import cv2
 import numpy as np
 from bfr_camera.calibration import CameraModel
+from bfr_model.geometry import OffsetCurve
+from bfr_model.params import load_params
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
@@ -640,7 +642,7 @@ class RigScene:
     plate_distance : float
         d_f [m]; the front plate is at ``z = +d_f / 2``.
     curve : object
-        :class:`bfr_sim.geometry.OffsetCurve` (ball-centre curve ``p(phi)`` and ``p'(phi)``).
+        :class:`bfr_model.geometry.OffsetCurve` (ball-centre curve ``p(phi)`` and ``p'(phi)``).
     """
 
     outline: np.ndarray
@@ -677,14 +679,11 @@ def rig_scene(params: Any = None, n_outline: int = 720) -> RigScene:
 
     Parameters
     ----------
-    params : bfr_sim.params.RigParams, optional
-        Default: :func:`bfr_sim.params.load_params` (the shipped ``rig.yaml``).
+    params : bfr_model.params.RigParams, optional
+        Default: :func:`bfr_model.params.load_params` (the shipped ``rig.yaml``).
     n_outline : int
         Number of outline vertices.
     """
-    from bfr_sim.geometry import OffsetCurve  # noqa: PLC0415 (render does not need physics)
-    from bfr_sim.params import load_params  # noqa: PLC0415
-
     p = load_params() if params is None else params
     curve = OffsetCurve.from_params(p)
     return RigScene(outline=np.asarray(curve.frame_outline(n_outline), dtype=float),

@@ -48,12 +48,15 @@ import math
 import time
 from collections import deque
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from bfr_camera.calibration import CameraModel, camera_from_dict, default_camera_path
-from bfr_camera.node_common import (
+from bfr_model.dynamics import RigidModel, curve_terms
+from bfr_model.layout import I_CW, I_SW
+from bfr_model.param_file import config_path
+from bfr_model.params import RigParams, default_params_path, params_from_dict
+from bfr_ros.node_common import (
     CLOCK_QOS,
     COMMAND_QOS,
     IMAGE_QOS,
@@ -72,8 +75,6 @@ from sensor_msgs.msg import CameraInfo, Image, JointState
 from std_msgs.msg import Float64MultiArray
 
 from bfr_interfaces.msg import ControllerState, SimTruth
-from bfr_sim.dynamics import I_CW, I_SW, RigidModel, curve_terms
-from bfr_sim.params import RigParams, default_params_path, params_from_dict
 from bfr_sim.render import FrameRenderer, RenderOptions, rig_scene
 
 __all__ = ["RigSimulation", "SimulatorNode", "main", "node_defaults"]
@@ -82,25 +83,11 @@ FloatArray = NDArray[np.float64]
 _NS = 1_000_000_000
 
 
-def _share(package: str, name: str, fallback: Path) -> Path:
-    try:
-        from ament_index_python.packages import get_package_share_directory  # noqa: PLC0415
-
-        p = Path(get_package_share_directory(package)) / "config" / name
-        if p.is_file():
-            return p
-    except Exception:  # noqa: BLE001 - not installed: source tree
-        pass
-    return fallback
-
-
 def node_defaults() -> dict[str, Any]:
     """Defaults of every parameter: rig.yaml, the camera group of camera.yaml, this node's file."""
-    here = Path(__file__).resolve().parent.parent / "config"
     d = dict(load_yaml_parameters(default_params_path()))
     d["camera"] = dict(load_yaml_parameters(default_camera_path())["camera"])
-    d.update(load_yaml_parameters(_share("bfr_sim", "simulator_node.yaml",
-                                         here / "simulator_node.yaml")))
+    d.update(load_yaml_parameters(config_path("bfr_sim", "simulator_node.yaml")))
     return d
 
 

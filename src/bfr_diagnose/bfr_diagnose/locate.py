@@ -1,0 +1,281 @@
+"""Locate the mismatch in time and state, and measure fit quality.
+
+Significance against the noise-only null: under the null each equation row is noise whose
+expected square at each sample, ``msq``, comes from the noise injections of
+:mod:`~bfr_diagnose.null` (the noise is not stationary: it grows where the ball moves
+fast), with integrated autocorrelation time ``tau`` samples; over a set of n residual
+samples ``Q = (n / tau) sum r^2 / sum msq`` is approximately chi-square with ``n / tau``
+degrees of freedom. Windows (default 0.5 s) and
+state regions (frame speed and its sign, the ball's place on the frame ``phi mod 2 pi``,
+torque level, normal force i.e. contact phase) are flagged where the p-value is below
+``alpha`` divided by the number of tests (Bonferroni).
+
+Short-horizon prediction: from the smoothed state at the start of each window the model is
+integrated open loop (RK4 on the grid, the recorded torque) for ``horizon`` seconds; the
+prediction error of theta, theta_dot and the ball's world angle is the fit measure a person
+can picture. Residual whiteness: Ljung-Box statistic of the residual taken once per kernel
+width (near-independent samples).
+"""
+
+from __future__ import annotations
+
+import itertools
+from typing import Any
+
+import numpy as np
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import RigParams
+from numpy.typing import NDArray
+from scipy.stats import chi2
+
+from bfr_diagnose.preprocess import Prepared, SensorCorrection
+from bfr_diagnose.residual import Residual
+
+__all__ = ["ljung_box", "locate", "prediction_errors", "rms_by_block"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _test(r: FloatArray, msq: FloatArray, tau: float) -> tuple[float, float]:
+    """(RMS ratio to the noise, p-value) of residual samples r under the null.
+
+    ``msq`` is the expected square of the noise residual at each sample; the sum
+    ``S = sum r^2`` is compared with its null mean ``mu = sum msq``:
+    ``Q = dof S / mu ~ chi2(dof)``, ``dof = n / tau``.
+    """
+    ok = np.isfinite(r) & np.isfinite(msq)
+    r = r[ok]
+    mu = float(np.sum(msq[ok]))
+    if r.size < 3 or mu <= 0:
+        return float("nan"), 1.0
+    ratio = float(np.sum(r ** 2)) / mu
+    dof = max(r.size / tau, 1.0)
+    return float(np.sqrt(ratio)), float(chi2.sf(ratio * dof, dof))
+
+
+def locate(prep: Prepared, res: Residual, sigma: tuple[float, float], tau: float,
+           window: float = 0.5, alpha: float = 0.01,
+           msq: list[FloatArray] | None = None) -> dict[str, Any]:
+    """Windows and state regions where the nominal residual exceeds the noise.
+
+    Parameters
+    ----------
+    prep : Prepared
+        Preprocessed recording.
+    res : Residual
+        Equation error of the nominal model.
+    sigma : (float, float)
+        Noise scales of rows 1, 2 [N m] (used when ``msq`` is not given).
+    tau : float
+        Autocorrelation time of the residual under the null [samples].
+    window : float
+        Window length [s].
+    alpha : float
+        Family-wise significance level.
+    msq : list of ndarray, optional
+        Expected square of the noise residual at each kept sample, rows 1, 2 (from the
+        noise-injection null; the noise is not stationary).
+
+    Returns
+    -------
+    dict
+        ``global`` (per-row RMS ratio and p-value), ``windows`` (flagged, worst first),
+        ``n_windows``, ``regions`` (flagged state bins, worst first), ``all_regions``.
+    """
+    idx = res.idx
+    t = prep.t[idx]
+
+    def expected(i: int) -> FloatArray:
+        if msq is not None and msq[i] is not None and np.size(msq[i]) == idx.size:
+            return np.asarray(msq[i], float)
+        return np.full(idx.size, float(sigma[i]) ** 2)
+
+    rows = {"frame_torque_row": (res.r1, expected(0))}
+    if prep.has_ball:
+        rows["ball_row"] = (res.r2, expected(1))
+    out: dict[str, Any] = {"global": {}, "windows": [], "regions": [], "all_regions": []}
+    for name, (r, s) in rows.items():
+        ratio, p = _test(r, s, tau)
+        out["global"][name] = {"rms_over_noise": ratio, "p_value": p,
+                               "significant": bool(p < alpha)}
+    edges = np.arange(t[0], t[-1] + window, window)
+    wins = []
+    for a, b in itertools.pairwise(edges):
+        m = (t >= a) & (t < b)
+        if m.sum() < 5:
+            continue
+        entry: dict[str, Any] = {"t0": float(a), "t1": float(b)}
+        worst = 1.0
+        for name, (r, s) in rows.items():
+            ratio, p = _test(r[m], s[m], tau)
+            entry[name] = {"rms_over_noise": ratio, "p_value": p}
+            worst = min(worst, p)
+        entry["p_min"] = worst
+        wins.append(entry)
+    n_w = max(len(wins), 1)
+    flagged = [w for w in wins if w["p_min"] < alpha / n_w]
+    for w in flagged:
+        w["signals"] = [k for k in rows if w[k]["p_value"] < alpha / n_w]
+    flagged.sort(key=lambda w: w["p_min"])
+    out["windows"] = flagged
+    out["n_windows"] = len(wins)
+    out["flagged_fraction"] = len(flagged) / n_w
+    # state regions
+    thd = prep.theta_dot[idx]
+    u = prep.u[idx]
+    bins: list[tuple[str, NDArray[np.bool_]]] = []
+    for lo, hi, lab in [(-np.inf, -2.0, "theta_dot < -2 rad/s"),
+                        (-2.0, -0.3, "-2 <= theta_dot < -0.3 rad/s"),
+                        (-0.3, 0.3, "|theta_dot| < 0.3 rad/s (near rest / reversal)"),
+                        (0.3, 2.0, "0.3 <= theta_dot < 2 rad/s"),
+                        (2.0, 5.0, "2 <= theta_dot < 5 rad/s"),
+                        (5.0, np.inf, "theta_dot >= 5 rad/s")]:
+        bins.append((lab, (thd >= lo) & (thd < hi)))
+    qs = np.quantile(np.abs(u), [1 / 3, 2 / 3])
+    bins.append((f"|torque| < {qs[0]:.3g} N m (low)", np.abs(u) < qs[0]))
+    bins.append((f"|torque| in [{qs[0]:.3g}, {qs[1]:.3g}) N m", (np.abs(u) >= qs[0])
+                 & (np.abs(u) < qs[1])))
+    bins.append((f"|torque| >= {qs[1]:.3g} N m (high)", np.abs(u) >= qs[1]))
+    if prep.has_ball:
+        ph = np.mod(res.phi[idx], 2.0 * np.pi)
+        for k in range(12):
+            a, b = k * np.pi / 6, (k + 1) * np.pi / 6
+            bins.append((f"phi mod 2pi in [{np.degrees(a):.0f}, {np.degrees(b):.0f}) deg",
+                         (ph >= a) & (ph < b)))
+        fn = res.fn[idx]
+        fq = np.nanquantile(fn, [0.1, 0.5])
+        bins.append((f"normal force < {fq[0]:.3g} N (light contact)", fn < fq[0]))
+        bins.append((f"normal force in [{fq[0]:.3g}, {fq[1]:.3g}) N", (fn >= fq[0])
+                     & (fn < fq[1])))
+        bins.append((f"normal force >= {fq[1]:.3g} N", fn >= fq[1]))
+    regs = []
+    for lab, m in bins:
+        if m.sum() < 10:
+            continue
+        entry = {"region": lab, "fraction": float(m.mean())}
+        worst = 1.0
+        for name, (r, s) in rows.items():
+            ratio, p = _test(r[m], s[m], tau)
+            entry[name] = {"rms_over_noise": ratio, "p_value": p}
+            worst = min(worst, p)
+        entry["p_min"] = worst
+        regs.append(entry)
+    n_r = max(len(regs), 1)
+    for e in regs:
+        e["significant"] = bool(e["p_min"] < alpha / n_r)
+        e["signals"] = [k for k in rows if e[k]["p_value"] < alpha / n_r]
+    out["all_regions"] = regs
+    # the regions where the mismatch concentrates: significant and above the median excess
+    sig = [e for e in regs if e["significant"]]
+    key = "ball_row" if prep.has_ball else "frame_torque_row"
+    sig.sort(key=lambda e: -max(e[k]["rms_over_noise"] for k in rows))
+    out["regions"] = sig[:8]
+    del key
+    return out
+
+
+def ljung_box(r: FloatArray, lag_step: int, lags: int = 10) -> dict[str, float]:
+    """Ljung-Box whiteness test of r sampled every ``lag_step`` samples."""
+    x = r[np.isfinite(r)][::max(lag_step, 1)]
+    n = x.size
+    if n < lags + 5:
+        return {"Q": float("nan"), "p_value": float("nan"), "rho1": float("nan")}
+    x = x - x.mean()
+    v = float(np.dot(x, x))
+    rho = np.array([float(np.dot(x[:-k], x[k:]) / v) for k in range(1, lags + 1)])
+    q = float(n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, lags + 1))))
+    return {"Q": q, "p_value": float(chi2.sf(q, lags)), "rho1": float(rho[0])}
+
+
+def rms_by_block(r: FloatArray, mask: NDArray[np.bool_]) -> float:
+    """RMS of the finite entries of r where mask holds."""
+    x = r[mask]
+    x = x[np.isfinite(x)]
+    return float(np.sqrt(np.mean(x ** 2))) if x.size else float("nan")
+
+
+def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_dot: FloatArray,
+                      sensor: SensorCorrection | None, test_mask_t: NDArray[np.bool_],
+                      horizon: float = 0.1, every: float = 0.2,
+                      keep_traces: int = 0) -> dict[str, Any]:
+    """Short-horizon open-loop prediction errors on the held-out samples.
+
+    Parameters
+    ----------
+    prep : Prepared
+        Preprocessed recording.
+    params : RigParams
+        Model to predict with.
+    phi, phi_dot : ndarray
+        Contact angle and rate on the grid under this model (NaN where unknown).
+    sensor : SensorCorrection or None
+        Camera correction (latency beyond the nominal, origin offset): the measured ball
+        angle is compared after undoing it.
+    test_mask_t : ndarray of bool
+        Grid samples that are held out.
+    horizon, every : float
+        Prediction horizon and spacing of the start points [s].
+    keep_traces : int
+        Return this many predicted traces (for the overlay plot).
+
+    Returns
+    -------
+    dict
+        ``rmse`` per signal (``theta`` [rad], ``theta_dot`` [rad/s], ``ball_angle`` [rad]),
+        ``n_windows`` and optionally ``traces``.
+    """
+    dt = float(prep.t[1] - prep.t[0])
+    nh = max(round(horizon / dt), 1)
+    step = max(round(every / dt), 1)
+    model = RigidModel(params)
+    ok = (prep.ball_ok if prep.has_ball else prep.frame_ok) & test_mask_t
+    psi_w, _ = prep.psi_for(sensor)
+    err = {"theta": [], "theta_dot": [], "ball_angle": []}
+    traces = []
+    n_win = 0
+    jf = params.frame.inertia
+    jp = params.joint
+    k_u = params.actuator.torque_gain
+    for i0 in range(0, prep.n - nh - 1, step):
+        if not ok[i0:i0 + nh + 1].all():
+            continue
+        if prep.has_ball:
+            if not (np.isfinite(phi[i0]) and np.isfinite(phi_dot[i0])):
+                continue
+            x = np.array([prep.theta[i0], phi[i0], prep.theta_dot[i0], phi_dot[i0], 0.0, 0.0])
+            xs = np.empty((nh + 1, 4))
+            xs[0] = x[:4]
+            for k in range(nh):
+                x = model.step(x, prep.u[i0 + k], dt, 1)
+                xs[k + 1] = x[:4]
+            if not np.all(np.isfinite(xs)):
+                continue
+            seg = slice(i0, i0 + nh + 1)
+            ball_w = model.curve.ball_angle(xs[:, 1]) - xs[:, 0]
+            e_b = ball_w - psi_w[seg]
+            err["ball_angle"].append(e_b[1:])
+        else:
+            th, v = prep.theta[i0], prep.theta_dot[i0]
+            xs = np.empty((nh + 1, 4))
+            xs[0] = [th, 0.0, v, 0.0]
+            for k in range(nh):
+                a = (k_u * prep.u[i0 + k] - jp.viscous_friction * v
+                     - jp.coulomb_friction * np.tanh(v / jp.coulomb_smoothing)) / jf
+                th += dt * v + 0.5 * dt * dt * a
+                v += dt * a
+                xs[k + 1] = [th, 0.0, v, 0.0]
+            seg = slice(i0, i0 + nh + 1)
+        err["theta"].append((xs[:, 0] - prep.theta[seg])[1:])
+        err["theta_dot"].append((xs[:, 2] - prep.theta_dot[seg])[1:])
+        n_win += 1
+        if len(traces) < keep_traces:
+            tr = {"t": prep.t[seg].tolist(), "theta_dot": xs[:, 2].tolist()}
+            if prep.has_ball:
+                tr["ball_angle"] = (model.curve.ball_angle(xs[:, 1]) - xs[:, 0]).tolist()
+            traces.append(tr)
+    rmse = {k: (float(np.sqrt(np.mean(np.concatenate(v) ** 2))) if v else float("nan"))
+            for k, v in err.items()}
+    out: dict[str, Any] = {"rmse": rmse, "n_windows": n_win, "horizon": horizon}
+    if keep_traces:
+        out["traces"] = traces
+    return out

@@ -1,0 +1,944 @@
+"""ROS 2 bags in pure Python (no ``rclpy``): write and read rosbag2 directories.
+
+A bag is a directory holding ``metadata.yaml`` and one ``<name>.mcap`` file (storage
+``mcap``, messages CDR-serialised, schemas ``ros2msg``), readable by ``ros2 bag`` (Jazzy)
+and Foxglove. Message definitions come from the ``rosbags`` typestore for ROS 2 Jazzy plus
+the project's own types, parsed at run time from the ``.msg`` files of ``bfr_interfaces``
+(source tree or installed ``share/bfr_interfaces/msg``; see :func:`find_msg_dirs`).
+
+- :class:`BagWriter`: for a recorder node that already holds CDR bytes (from
+  ``rclpy.serialization.serialize_message``): ``write(topic, msgtype, cdr, stamp_ns)``.
+  Chunks are flushed to disk every ``flush_interval`` seconds and on :meth:`BagWriter.close`
+  (call it from the node's shutdown path: a SIGINT'd recorder then loses nothing).
+- :func:`write_recording_bag`: a :class:`~bfr_model.recording.Recording` as standard messages.
+- :func:`read_bag`: a bag back into a :class:`~bfr_model.recording.Recording`. MCAP files
+  without a summary section (writer killed) or cut mid-chunk are read up to the last
+  complete chunk, with a warning; sqlite3 bags are read through ``rosbags``.
+
+Topics (defaults, remappable; a leading ``/`` is optional when reading):
+
+==================  ==================================  =================================
+role                topic                               type
+==================  ==================================  =================================
+``joint_states``    ``joint_states``                    ``sensor_msgs/msg/JointState``
+``command``         ``effort_controller/commands``      ``std_msgs/msg/Float64MultiArray``
+``ball``            ``ball_observation``                ``bfr_interfaces/msg/BallObservation``
+``truth``           ``sim_truth``                       ``bfr_interfaces/msg/SimTruth``
+``controller``      ``controller_state``                ``bfr_interfaces/msg/ControllerState``
+==================  ==================================  =================================
+"""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import time
+import warnings
+import weakref
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, BinaryIO
+
+import numpy as np
+import yaml
+from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.records import (
+    Attachment,
+    Channel,
+    DataEnd,
+    Footer,
+    Message,
+    Metadata,
+    Schema,
+)
+from mcap.stream_reader import StreamReader
+from mcap.writer import CompressionType, Writer
+from numpy.typing import NDArray
+from rosbags.rosbag2 import Reader
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+from bfr_model.param_file import ParameterError, share_path
+from bfr_model.recording import Recording, RecordingError
+
+__all__ = [
+    "DEFAULT_TOPICS",
+    "BagError",
+    "BagWarning",
+    "BagWriter",
+    "find_msg_dirs",
+    "make_typestore",
+    "read_bag",
+    "read_bag_messages",
+    "write_recording_bag",
+]
+
+#: Default topic per role (relative names, as DEVELOPERS.md asks).
+DEFAULT_TOPICS: dict[str, str] = {
+    "joint_states": "joint_states",
+    "command": "effort_controller/commands",
+    "ball": "ball_observation",
+    "truth": "sim_truth",
+    "controller": "controller_state",
+}
+_TYPES = {
+    "joint_states": "sensor_msgs/msg/JointState",
+    "command": "std_msgs/msg/Float64MultiArray",
+    "ball": "bfr_interfaces/msg/BallObservation",
+    "truth": "bfr_interfaces/msg/SimTruth",
+    "controller": "bfr_interfaces/msg/ControllerState",
+}
+#: Name of the frame joint in ``JointState``.
+FRAME_JOINT = "frame_joint"
+_META_NAME = "bfr_recording"
+_EXTRA_ATTACHMENT = "bfr_recording_extra.npz"
+_NS = 1_000_000_000
+
+
+class BagError(RecordingError):
+    """A bag cannot be written or read; the message names the file and the problem."""
+
+
+class BagWarning(UserWarning):
+    """A bag was read only in part (e.g. truncated after the writer was killed)."""
+
+
+# -- message definitions --------------------------------------------------------------------
+def find_msg_dirs(extra: list[str | Path] | None = None) -> list[Path]:
+    """Directories holding ``bfr_interfaces`` ``.msg`` files, most specific first.
+
+    Searched: ``extra``; ``$BFR_INTERFACES_MSG_DIR`` (``os.pathsep``-separated); the
+    installed ``share/bfr_interfaces/msg`` or the source tree's
+    (:func:`bfr_model.param_file.share_path`).
+    """
+    cands: list[Path] = [Path(p) for p in (extra or [])]
+    env = os.environ.get("BFR_INTERFACES_MSG_DIR", "")
+    cands += [Path(p) for p in env.split(os.pathsep) if p]
+    try:
+        cands.append(share_path("bfr_interfaces", "msg"))
+    except ParameterError:
+        pass  # only the standard types then; a bag of bfr_interfaces types says so when read
+    out: list[Path] = []
+    for c in cands:
+        if c.is_dir() and any(c.glob("*.msg")) and c.resolve() not in out:
+            out.append(c.resolve())
+    return out
+
+
+_TYPESTORE_CACHE: dict[tuple[str, ...], Any] = {}
+
+
+def make_typestore(msg_dirs: list[str | Path] | None = None) -> Any:
+    """A ``rosbags`` typestore: ROS 2 Jazzy standard types plus the ``.msg`` files found.
+
+    The package name of each ``.msg`` file is the name of the directory above ``msg/``
+    (``bfr_interfaces``), so ``BallObservation.msg`` registers
+    ``bfr_interfaces/msg/BallObservation``. Cached per directory list.
+    """
+    dirs = find_msg_dirs(msg_dirs)
+    key = tuple(str(d) for d in dirs)
+    if key in _TYPESTORE_CACHE:
+        return _TYPESTORE_CACHE[key]
+    store = get_typestore(Stores.ROS2_JAZZY)
+    types: dict[str, Any] = {}
+    for d in reversed(dirs):  # earlier directories win
+        pkg = d.parent.name
+        for f in sorted(d.glob("*.msg")):
+            name = f"{pkg}/msg/{f.stem}"
+            try:
+                types.update(get_types_from_msg(f.read_text(encoding="utf-8"), name))
+            except Exception as exc:  # rosbags raises its own parser errors
+                raise BagError(f"{f}: cannot parse message definition: {exc}") from exc
+    if types:
+        store.register({k: v for k, v in types.items() if k not in store.types or
+                        k.startswith(tuple(f"{d.parent.name}/" for d in dirs))})
+    _TYPESTORE_CACHE[key] = store
+    return store
+
+
+def _register_from_schema(store: Any, msgtype: str, text: str) -> None:
+    """Register ``msgtype`` (and dependencies) from a ``ros2msg`` schema if unknown."""
+    if msgtype in store.types:
+        return
+
+    try:
+        types = get_types_from_msg(text, msgtype)
+    except Exception as exc:
+        raise BagError(f"cannot parse the bag's definition of {msgtype}: {exc}") from exc
+    store.register({k: v for k, v in types.items() if k not in store.types})
+
+
+# -- writer ---------------------------------------------------------------------------------
+@dataclass
+class _TopicInfo:
+    channel_id: int
+    msgtype: str
+    rihs01: str
+    count: int = 0
+
+
+@dataclass
+class _WriterState:
+    """Mutable state shared with the finaliser (closing at interpreter exit)."""
+
+    fh: BinaryIO | None
+    writer: Any
+    closed: bool = False
+    topics: dict[str, _TopicInfo] = field(default_factory=dict)
+
+
+def _finalize(state: _WriterState) -> None:  # pragma: no cover - interpreter exit path
+    if not state.closed and state.writer is not None:
+        try:
+            state.writer.finish()
+            if state.fh is not None:
+                state.fh.close()
+        except Exception:  # noqa: BLE001 - best effort at exit
+            pass
+        state.closed = True
+
+
+class BagWriter:
+    """Write a rosbag2 directory with MCAP storage from CDR-serialised messages.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory to create (must not exist). The MCAP file is ``<path>/<name>.mcap``.
+    msg_dirs : list of path, optional
+        Extra directories of ``.msg`` files (see :func:`find_msg_dirs`).
+    chunk_size : int
+        Bytes per MCAP chunk before it is written out [B].
+    flush_interval : float or None
+        Also write the pending chunk when this much wall time passed since the last flush
+        [s] (bounds what a ``kill -9`` loses); None disables it.
+    custom_data : dict, optional
+        String key/values for ``metadata.yaml``'s ``custom_data``.
+
+    Examples
+    --------
+    In a recorder node (``cdr = rclpy.serialization.serialize_message(msg)``)::
+
+        with BagWriter("run1") as bag:
+            bag.write("joint_states", "sensor_msgs/msg/JointState", cdr, stamp_ns)
+    """
+
+    def __init__(self, path: str | Path, *, msg_dirs: list[str | Path] | None = None,
+                 chunk_size: int = 256 * 1024, flush_interval: float | None = 1.0,
+                 custom_data: dict[str, str] | None = None) -> None:
+
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f"{self.path}: exists already; a bag is written to a new directory")
+        self.typestore = make_typestore(msg_dirs)
+        self.mcap_path = self.path / f"{self.path.name}.mcap"
+        try:
+            self.path.mkdir(parents=True)
+            fh = self.mcap_path.open("xb")
+        except OSError as exc:
+            raise BagError(f"{self.path}: cannot create bag: {exc}") from exc
+        writer = Writer(fh, chunk_size=chunk_size, compression=CompressionType.NONE)
+        writer.start(profile="ros2", library="bfr_model.io.bag")
+        self._state = _WriterState(fh=fh, writer=writer)
+        self._schemas: dict[str, int] = {}
+        self._flush_interval = flush_interval
+        self._last_flush = time.monotonic()
+        self._t_min: int | None = None
+        self._t_max: int | None = None
+        self._count = 0
+        self.custom_data = dict(custom_data or {})
+        self._metadata_records: list[tuple[str, dict[str, str]]] = []
+        self._attachments: list[tuple[str, str, bytes]] = []
+        self._finalizer = weakref.finalize(self, _finalize, self._state)
+
+    # context manager
+    def __enter__(self) -> BagWriter:
+        """Return self."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Close (flush everything and write the summary and metadata.yaml)."""
+        self.close()
+
+    @property
+    def closed(self) -> bool:
+        """True after :meth:`close`."""
+        return self._state.closed
+
+    @property
+    def message_count(self) -> int:
+        """Messages written so far."""
+        return self._count
+
+    def _schema_id(self, msgtype: str) -> int:
+        if msgtype not in self._schemas:
+            if msgtype not in self.typestore.types:
+                raise BagError(
+                    f"{self.path}: unknown message type {msgtype!r}: not a ROS 2 Jazzy "
+                    f"standard type and not found in the .msg directories "
+                    f"{[str(d) for d in find_msg_dirs()]}")
+            text, _ = self.typestore.generate_msgdef(msgtype, ros_version=2)
+            self._schemas[msgtype] = self._state.writer.register_schema(
+                name=msgtype, encoding="ros2msg", data=text.encode("utf-8"))
+        return self._schemas[msgtype]
+
+    def add_topic(self, topic: str, msgtype: str) -> None:
+        """Declare a topic (optional: :meth:`write` declares on first use).
+
+        Raises
+        ------
+        BagError
+            If the topic exists with another type, or the type is unknown.
+        """
+        if self.closed:
+            raise BagError(f"{self.path}: bag is closed")
+        info = self._state.topics.get(topic)
+        if info is not None:
+            if info.msgtype != msgtype:
+                raise BagError(f"{self.path}: topic {topic!r} already has type "
+                               f"{info.msgtype!r}, cannot write {msgtype!r}")
+            return
+        sid = self._schema_id(msgtype)
+        cid = self._state.writer.register_channel(
+            topic=topic, message_encoding="cdr", schema_id=sid,
+            metadata={"offered_qos_profiles": "[]"})
+        self._state.topics[topic] = _TopicInfo(cid, msgtype, self.typestore.hash_rihs01(msgtype))
+
+    def write(self, topic: str, msgtype: str, data: bytes | bytearray | memoryview,
+              timestamp_ns: int) -> None:
+        """Write one CDR-serialised message.
+
+        Parameters
+        ----------
+        topic : str
+            Topic name (as recorded, e.g. ``/joint_states``).
+        msgtype : str
+            Full type name, e.g. ``sensor_msgs/msg/JointState``.
+        data : bytes
+            CDR bytes including the 4-byte encapsulation header (what
+            ``rclpy.serialization.serialize_message`` returns).
+        timestamp_ns : int
+            Receive (log) time [ns], non-negative.
+        """
+        self.add_topic(topic, msgtype)
+        ts = int(timestamp_ns)
+        if ts < 0:
+            raise BagError(f"{self.path}: negative timestamp {ts} ns on {topic!r}")
+        info = self._state.topics[topic]
+        self._state.writer.add_message(channel_id=info.channel_id, log_time=ts,
+                                       data=bytes(data), publish_time=ts,
+                                       sequence=info.count)
+        info.count += 1
+        self._count += 1
+        self._t_min = ts if self._t_min is None else min(self._t_min, ts)
+        self._t_max = ts if self._t_max is None else max(self._t_max, ts)
+        if self._flush_interval is not None and \
+                time.monotonic() - self._last_flush >= self._flush_interval:
+            self.flush()
+
+    def write_message(self, topic: str, msg: Any, timestamp_ns: int) -> None:
+        """Serialise a ``rosbags`` message object with the typestore and write it."""
+        msgtype = msg.__msgtype__
+        self.write(topic, msgtype, self.typestore.serialize_cdr(msg, msgtype), timestamp_ns)
+
+    def add_metadata(self, name: str, data: dict[str, str]) -> None:
+        """Queue an MCAP metadata record (written on close)."""
+        self._metadata_records.append((name, {str(k): str(v) for k, v in data.items()}))
+
+    def add_attachment(self, name: str, media_type: str, data: bytes) -> None:
+        """Queue an MCAP attachment (written on close)."""
+        self._attachments.append((name, media_type, bytes(data)))
+
+    def flush(self) -> None:
+        """Write the pending chunk and flush the file (data survives a later kill)."""
+        if self.closed:
+            return
+        self._state.writer.flush()
+        if self._state.fh is not None:
+            self._state.fh.flush()
+            try:
+                os.fsync(self._state.fh.fileno())
+            except OSError:  # pragma: no cover - e.g. on special files
+                pass
+        self._last_flush = time.monotonic()
+
+    def close(self) -> None:
+        """Flush, write the MCAP summary and ``metadata.yaml``; idempotent."""
+        if self.closed:
+            return
+        w = self._state.writer
+        w.flush()
+        now = self._t_max or 0
+        for name, data in self._metadata_records:
+            w.add_metadata(name, data)
+        for name, media_type, data in self._attachments:
+            w.add_attachment(create_time=0, log_time=now, name=name, media_type=media_type,
+                             data=data)
+        w.finish()
+        assert self._state.fh is not None
+        self._state.fh.close()
+        self._state.closed = True
+        self._finalizer.detach()
+        self._write_metadata_yaml()
+
+    def _write_metadata_yaml(self) -> None:
+        start = self._t_min or 0
+        duration = (self._t_max - self._t_min) if self._t_min is not None else 0  # type: ignore[operator]
+        info = {
+            "version": 9,
+            "storage_identifier": "mcap",
+            "duration": {"nanoseconds": int(duration)},
+            "starting_time": {"nanoseconds_since_epoch": int(start)},
+            "message_count": int(self._count),
+            "topics_with_message_count": [
+                {"topic_metadata": {"name": topic, "type": t.msgtype,
+                                    "serialization_format": "cdr",
+                                    "offered_qos_profiles": [],
+                                    "type_description_hash": t.rihs01},
+                 "message_count": int(t.count)}
+                for topic, t in self._state.topics.items()],
+            "compression_format": "",
+            "compression_mode": "",
+            "relative_file_paths": [self.mcap_path.name],
+            "files": [{"path": self.mcap_path.name,
+                       "starting_time": {"nanoseconds_since_epoch": int(start)},
+                       "duration": {"nanoseconds": int(duration)},
+                       "message_count": int(self._count)}],
+            "custom_data": self.custom_data or None,
+            "ros_distro": "jazzy",
+        }
+        tmp = self.path / "metadata.yaml.tmp"
+        tmp.write_text(yaml.safe_dump({"rosbag2_bagfile_information": info},
+                                      default_flow_style=False, sort_keys=False),
+                       encoding="utf-8")
+        tmp.replace(self.path / "metadata.yaml")
+
+
+# -- Recording -> bag -----------------------------------------------------------------------
+def _resolve_topics(topics: dict[str, str] | None) -> dict[str, str]:
+    out = dict(DEFAULT_TOPICS)
+    by_default_name = {v: k for k, v in DEFAULT_TOPICS.items()}
+    for key, value in (topics or {}).items():
+        k = key.lstrip("/")
+        role = k if k in DEFAULT_TOPICS else by_default_name.get(k)
+        if role is None:
+            raise BagError(f"unknown topic role {key!r}; roles: {sorted(DEFAULT_TOPICS)} "
+                           f"(or their default topic names)")
+        out[role] = value
+    return out
+
+
+def _stamp(store: Any, ns: int) -> Any:
+    time_t = store.types["builtin_interfaces/msg/Time"]
+    return time_t(sec=int(ns // _NS), nanosec=int(ns % _NS))
+
+
+def write_recording_bag(path: str | Path, recording: Recording,
+                        topics: dict[str, str] | None = None, *,
+                        msg_dirs: list[str | Path] | None = None,
+                        leading_slash: bool = True) -> Path:
+    """Write a recording as a ROS 2 bag of standard and ``bfr_interfaces`` messages.
+
+    Written per sample ``k`` (log time = header stamp = ``t[k]``):
+
+    - ``joint_states``: ``JointState`` with ``name = ['frame_joint']``, ``position =
+      [theta]``, ``velocity = [theta_dot]``, ``effort = [torque]``;
+    - ``command``: ``Float64MultiArray`` with ``data = [torque]``;
+    - ``ball``: ``BallObservation`` (frame ``world``) whenever the held fix or its validity
+      changes: ``x, y, phi``, ``theta_used = phi - atan2(x, y)``, ``status`` FOUND or
+      NOT_FOUND; pixel fields NaN;
+    - ``truth`` (simulation only): ``SimTruth`` with the ground-truth state, ball centre,
+      torque and energies (unknown fields NaN);
+    - ``controller`` (when ``phi_dot`` exists): ``ControllerState`` carrying ``phi_dot``.
+
+    ``recording.meta`` is stored as MCAP metadata ``bfr_recording`` (JSON) and the
+    ``extra`` arrays as the attachment ``bfr_recording_extra.npz``.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory to create.
+    recording : Recording
+        The data; ``t`` must be >= 0 (ROS time).
+    topics : dict, optional
+        Topic per role (keys: roles or default topic names), see the module table.
+    msg_dirs : list of path, optional
+        Extra ``.msg`` directories.
+    leading_slash : bool
+        Record names fully qualified (``/joint_states``), as ``ros2 bag record`` does.
+
+    Returns
+    -------
+    Path
+        The bag directory.
+    """
+    rec = recording
+    if rec.t[0] < 0:
+        raise BagError(f"{path}: recording starts at t = {rec.t[0]} s < 0; ROS time cannot be "
+                       f"negative (slice or shift the recording first)")
+    names = _resolve_topics(topics)
+    if leading_slash:
+        names = {k: v if v.startswith("/") else "/" + v for k, v in names.items()}
+    ns = np.round(rec.t * _NS).astype(np.int64)
+    with BagWriter(path, msg_dirs=msg_dirs, flush_interval=None) as bag:
+        store = bag.typestore
+        T = store.types
+        header_t, js_t = T["std_msgs/msg/Header"], T["sensor_msgs/msg/JointState"]
+        arr_t, layout_t = T["std_msgs/msg/Float64MultiArray"], T["std_msgs/msg/MultiArrayLayout"]
+        ball_t = T[_TYPES["ball"]]
+        ser = store.serialize_cdr
+        n = len(rec)
+        ball_change = np.ones(n, bool)
+        if n > 1:
+            same = ((rec.ball_valid[1:] == rec.ball_valid[:-1])
+                    & _eq_nan(rec.ball_x[1:], rec.ball_x[:-1])
+                    & _eq_nan(rec.ball_y[1:], rec.ball_y[:-1])
+                    & _eq_nan(rec.phi[1:], rec.phi[:-1]))
+            ball_change[1:] = ~same
+        truth = rec.has_truth
+        nan = float("nan")
+        for k in range(n):
+            stamp = _stamp(store, int(ns[k]))
+            ts = int(ns[k])
+            msg = js_t(header=header_t(stamp=stamp, frame_id=""), name=[FRAME_JOINT],
+                       position=np.array([rec.theta[k]]), velocity=np.array([rec.theta_dot[k]]),
+                       effort=np.array([rec.torque[k]]))
+            bag.write(names["joint_states"], js_t.__msgtype__, ser(msg, js_t.__msgtype__), ts)
+            cmd = arr_t(layout=layout_t(dim=[], data_offset=0), data=np.array([rec.torque[k]]))
+            bag.write(names["command"], arr_t.__msgtype__, ser(cmd, arr_t.__msgtype__), ts)
+            if ball_change[k]:
+                valid = bool(rec.ball_valid[k])
+                x, y, ph = (float(rec.ball_x[k]), float(rec.ball_y[k]), float(rec.phi[k]))
+                obs = ball_t(header=header_t(stamp=stamp, frame_id="world"),
+                             status=ball_t.FOUND if valid else ball_t.NOT_FOUND, valid=valid,
+                             confidence=1.0 if valid else 0.0, u=nan, v=nan, radius_px=nan,
+                             x=x if valid else nan, y=y if valid else nan,
+                             phi=ph if valid else nan,
+                             theta_used=ph - float(np.arctan2(x, y)) if valid else nan,
+                             processing_time=nan)
+                bag.write(names["ball"], _TYPES["ball"], ser(obs, _TYPES["ball"]), ts)
+            if truth:
+                bag.write(names["truth"], _TYPES["truth"],
+                          ser(_truth_msg(T, rec, k, stamp), _TYPES["truth"]), ts)
+            if rec.phi_dot is not None:
+                bag.write(names["controller"], _TYPES["controller"],
+                          ser(_controller_msg(T, rec, k, stamp), _TYPES["controller"]), ts)
+        bag.add_metadata(_META_NAME, {"meta": json.dumps(_jsonable(rec.meta), default=str)})
+        if rec.extra:
+            buf = io.BytesIO()
+            np.savez(buf, **rec.extra)
+            bag.add_attachment(_EXTRA_ATTACHMENT, "application/x-npz", buf.getvalue())
+        bag.custom_data["bfr_source_kind"] = str(rec.meta.get("source_kind", ""))
+    return Path(path)
+
+
+def _first(seq: Any) -> float:
+    return float(seq[0]) if len(seq) else float("nan")
+
+
+def _eq_nan(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.bool_]:
+    return (a == b) | (np.isnan(a) & np.isnan(b))
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return value.item()
+    if isinstance(value, float) and not np.isfinite(value):
+        return str(value)
+    return value
+
+
+def _opt(arr: NDArray[np.float64] | None, k: int, default: float = float("nan")) -> float:
+    return float(arr[k]) if arr is not None else default
+
+
+def _truth_msg(T: Any, rec: Recording, k: int, stamp: Any) -> Any:
+    nan = float("nan")
+    return T[_TYPES["truth"]](
+        header=T["std_msgs/msg/Header"](stamp=stamp, frame_id="world"),
+        theta=_opt(rec.theta_true, k, float(rec.theta[k])), phi=_opt(rec.phi_true, k),
+        theta_dot=_opt(rec.theta_dot_true, k, float(rec.theta_dot[k])),
+        phi_dot=_opt(rec.phi_dot_true, k), ball_x=_opt(rec.ball_x_true, k),
+        ball_y=_opt(rec.ball_y_true, k), ball_vx=nan, ball_vy=nan, ball_spin=nan,
+        ball_spin_rate=nan, torque=float(rec.torque[k]), kinetic=_opt(rec.kinetic, k),
+        potential=_opt(rec.potential, k), energy=_opt(rec.energy, k), work_in=nan,
+        in_contact=True, normal_force=nan, slip_velocity=nan)
+
+
+def _controller_msg(T: Any, rec: Recording, k: int, stamp: Any) -> Any:
+    nan = float("nan")
+    cs = T[_TYPES["controller"]]
+    valid = bool(rec.ball_valid[k])
+    return cs(header=T["std_msgs/msg/Header"](stamp=stamp, frame_id=""),
+              mode=cs.ROLLING if valid else cs.WAITING, theta=float(rec.theta[k]),
+              theta_dot=float(rec.theta_dot[k]), phi=float(rec.phi[k]),
+              phi_dot=_opt(rec.phi_dot, k), y=nan, y_dot=nan, z=nan, phase=nan,
+              torque=float(rec.torque[k]), torque_unsaturated=nan, saturated=False,
+              ball_age=nan)
+
+
+# -- reading --------------------------------------------------------------------------------
+@dataclass
+class RawMessage:
+    """One serialised message read from a bag."""
+
+    topic: str
+    msgtype: str
+    log_time: int
+    data: bytes
+
+
+@dataclass
+class BagContents:
+    """Raw messages of a bag plus its definitions, metadata and problems."""
+
+    path: Path
+    storage: str
+    messages: list[RawMessage]
+    schemas: dict[str, str]
+    metadata: dict[str, dict[str, str]]
+    attachments: dict[str, bytes]
+    warnings: list[str]
+    complete: bool
+
+
+def _locate(path: Path) -> tuple[str, Path, dict[str, Any] | None]:
+    """Storage kind, storage file (or bag dir for sqlite3) and parsed metadata.yaml."""
+    if not path.exists():
+        raise BagError(f"{path}: no such bag (directory or file)")
+    if path.is_file():
+        if path.suffix == ".mcap":
+            return "mcap", path, None
+        if path.suffix == ".db3":
+            return "sqlite3", path.parent, None
+        raise BagError(f"{path}: not a bag (expected a directory, .mcap or .db3)")
+    meta = None
+    mfile = path / "metadata.yaml"
+    if mfile.exists():
+        try:
+            meta = yaml.safe_load(mfile.read_text(encoding="utf-8"))
+            info = meta["rosbag2_bagfile_information"]
+        except (yaml.YAMLError, KeyError, TypeError) as exc:
+            raise BagError(f"{mfile}: unreadable metadata.yaml: {exc}") from exc
+        storage = str(info.get("storage_identifier", ""))
+        files = [path / f for f in info.get("relative_file_paths", [])]
+        if storage == "sqlite3":
+            return "sqlite3", path, meta
+        if storage == "mcap":
+            if len(files) != 1:
+                raise BagError(f"{path}: expected one storage file, metadata.yaml lists "
+                               f"{[f.name for f in files]}")
+            if not files[0].exists():
+                raise BagError(f"{files[0]}: storage file listed in metadata.yaml is missing")
+            return "mcap", files[0], meta
+        raise BagError(f"{mfile}: unsupported storage {storage!r} (mcap or sqlite3)")
+    mcaps, dbs = sorted(path.glob("*.mcap")), sorted(path.glob("*.db3"))
+    if len(mcaps) == 1:
+        return "mcap", mcaps[0], None
+    if dbs:
+        raise BagError(f"{path}: sqlite3 bag without metadata.yaml (run `ros2 bag reindex`)")
+    raise BagError(f"{path}: no metadata.yaml and {len(mcaps)} .mcap files (need exactly one)")
+
+
+def _read_mcap(path: Path) -> BagContents:
+
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    msgs: list[RawMessage] = []
+    metadata: dict[str, dict[str, str]] = {}
+    attachments: dict[str, bytes] = {}
+    warns: list[str] = []
+    complete = False
+    size = path.stat().st_size
+    if size == 0:
+        raise BagError(f"{path}: empty file (0 bytes)")
+    pending: list[Message] = []
+    with path.open("rb") as fh:
+        reader = StreamReader(fh, skip_magic=False, validate_crcs=True)
+        try:
+            for rec in reader.records:
+                if isinstance(rec, Schema):
+                    schemas[rec.id] = rec
+                elif isinstance(rec, Channel):
+                    channels[rec.id] = rec
+                elif isinstance(rec, Message):
+                    pending.append(rec)
+                elif isinstance(rec, Metadata):
+                    metadata[rec.name] = dict(rec.metadata)
+                elif isinstance(rec, Attachment):
+                    attachments[rec.name] = bytes(rec.data)
+                elif isinstance(rec, DataEnd):
+                    pass
+                elif isinstance(rec, Footer):
+                    complete = True
+        except InvalidMagic as exc:
+            if not pending and not channels:
+                raise BagError(f"{path}: not an MCAP file ({exc})") from exc
+            warns.append(f"{path}: bad magic at the end: {exc}")
+        except (McapError, EOFError, ValueError, KeyError, IndexError, OSError) as exc:
+            what = "file ends inside a record (truncated)" if isinstance(exc, EndOfFile) \
+                else f"{type(exc).__name__}: {exc}"
+            warns.append(f"{path}: truncated or corrupt at byte ~{fh.tell()} of {size} "
+                         f"({what}); kept {len(pending)} message(s) from the complete "
+                         f"chunks before it")
+        except Exception as exc:  # noqa: BLE001 - struct.error, zlib errors, ...
+            warns.append(f"{path}: unreadable after byte ~{fh.tell()} of {size} "
+                         f"({type(exc).__name__}: {exc}); kept {len(pending)} message(s)")
+    if not complete and not warns:
+        warns.append(f"{path}: no footer (writer did not finish); read what was there")
+    for m in pending:
+        ch = channels.get(m.channel_id)
+        if ch is None:
+            warns.append(f"{path}: message on unknown channel {m.channel_id} skipped")
+            continue
+        sc = schemas.get(ch.schema_id)
+        msgs.append(RawMessage(topic=ch.topic, msgtype=sc.name if sc else "",
+                               log_time=int(m.log_time), data=bytes(m.data)))
+    defs = {sc.name: sc.data.decode("utf-8", errors="replace") for sc in schemas.values()
+            if sc.encoding == "ros2msg"}
+    return BagContents(path=path, storage="mcap", messages=msgs, schemas=defs,
+                       metadata=metadata, attachments=attachments, warnings=warns,
+                       complete=complete and not warns)
+
+
+def _read_sqlite(path: Path) -> BagContents:
+
+    msgs: list[RawMessage] = []
+    defs: dict[str, str] = {}
+    try:
+        with Reader(path) as reader:
+            for conn in reader.connections:
+                if conn.msgdef and conn.msgdef.data:
+                    defs[conn.msgtype] = conn.msgdef.data
+            for conn, ts, raw in reader.messages():
+                msgs.append(RawMessage(conn.topic, conn.msgtype, int(ts), bytes(raw)))
+    except Exception as exc:  # rosbags raises ReaderError and sqlite3 errors
+        raise BagError(f"{path}: cannot read sqlite3 bag: {exc}") from exc
+    return BagContents(path=path, storage="sqlite3", messages=msgs, schemas=defs,
+                       metadata={}, attachments={}, warnings=[], complete=True)
+
+
+def read_bag_messages(path: str | Path) -> BagContents:
+    """All raw messages of a bag (directory, ``.mcap`` or ``.db3``), tolerant of truncation.
+
+    Raises
+    ------
+    BagError
+        If the path is not a bag or nothing can be read.
+    """
+    p = Path(path)
+    storage, target, _ = _locate(p)
+    return _read_mcap(target) if storage == "mcap" else _read_sqlite(target)
+
+
+def _zoh(src_ns: NDArray[np.int64], values: NDArray[Any], at_ns: NDArray[np.int64],
+         fill: Any) -> tuple[NDArray[Any], NDArray[np.bool_]]:
+    """Zero-order hold of ``values`` (at sorted ``src_ns``) onto ``at_ns``."""
+    values = np.asarray(values)
+    idx = np.searchsorted(src_ns, at_ns, side="right") - 1
+    have = idx >= 0
+    out = np.full(at_ns.shape + values.shape[1:], fill, dtype=np.float64)
+    if len(values):
+        out[have] = values[idx[have]]
+    return out, have
+
+
+def read_bag(path: str | Path, topic_map: dict[str, str] | None = None, *,
+             strict: bool = False, msg_dirs: list[str | Path] | None = None,
+             time_origin: str = "auto") -> Recording:
+    """Read a bag into a :class:`Recording` (our conventions: the bag's messages are).
+
+    The time base is the ``joint_states`` header stamps (sorted, duplicates dropped).
+    ``torque`` is the latest ``command`` at or before each sample (``effort`` of the joint
+    state before the first command, or when there is no command topic). Ball fields hold
+    the latest ``ball`` observation by its receive (log) time; ``phi_dot`` comes from the
+    ``controller`` topic and ground truth from ``truth`` when present. Log times are mapped
+    to the header clock by the median offset between the two on ``joint_states``.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory, ``.mcap`` or ``.db3`` file.
+    topic_map : dict, optional
+        Topic per role, keys being roles (``joint_states``, ``command``, ``ball``,
+        ``truth``, ``controller``) or their default topic names; leading ``/`` optional.
+    strict : bool
+        Raise :class:`BagError` when the bag is truncated or corrupt instead of returning
+        what was readable (with a :class:`BagWarning` and ``meta["warnings"]``).
+    msg_dirs : list of path, optional
+        Extra ``.msg`` directories (definitions embedded in the bag are used first).
+    time_origin : {"auto", "absolute", "first"}
+        ``"absolute"`` keeps stamps as seconds; ``"first"`` subtracts the first
+        ``joint_states`` stamp; ``"auto"`` does the latter only for wall-clock stamps
+        (> 1e8 s), recording the origin in ``meta["time_origin_ns"]``.
+
+    Raises
+    ------
+    BagError
+        Not a bag, no ``joint_states`` messages, undecodable messages, or (``strict``) a
+        truncated file. The message names the file.
+    """
+    p = Path(path)
+    contents = read_bag_messages(p)
+    if contents.warnings:
+        if strict:
+            raise BagError("; ".join(contents.warnings))
+        for w in contents.warnings:
+            warnings.warn(w, BagWarning, stacklevel=2)
+    names = {k: v.lstrip("/") for k, v in _resolve_topics(topic_map).items()}
+    store = make_typestore(msg_dirs)
+    for msgtype, text in contents.schemas.items():
+        _register_from_schema(store, msgtype, text)
+    by_role: dict[str, list[RawMessage]] = {r: [] for r in names}
+    role_of = {v: k for k, v in names.items()}
+    for m in contents.messages:
+        role = role_of.get(m.topic.lstrip("/"))
+        if role is not None:
+            by_role[role].append(m)
+    if not by_role["joint_states"]:
+        topics = sorted({m.topic for m in contents.messages})
+        why = f" ({'; '.join(contents.warnings)})" if contents.warnings else ""
+        raise BagError(f"{contents.path}: no messages on {names['joint_states']!r} (the time "
+                       f"base); topics in the bag: {topics}{why}")
+
+    def decode(m: RawMessage) -> Any:
+        try:
+            return store.deserialize_cdr(m.data, m.msgtype)
+        except Exception as exc:
+            raise BagError(f"{contents.path}: cannot decode a {m.msgtype} message on "
+                           f"{m.topic!r} at {m.log_time} ns: {exc}") from exc
+
+    notes: list[str] = []
+    js = [decode(m) for m in by_role["joint_states"]]
+    js_log = np.array([m.log_time for m in by_role["joint_states"]], dtype=np.int64)
+    stamp = np.array([s.header.stamp.sec * _NS + s.header.stamp.nanosec for s in js],
+                     dtype=np.int64)
+    order = np.argsort(stamp, kind="stable")
+    keep = np.ones(order.size, bool)
+    keep[1:] = np.diff(stamp[order]) > 0
+    if not keep.all() or not np.all(order == np.arange(order.size)):
+        notes.append(f"joint_states: sorted by stamp, {int((~keep).sum())} duplicate stamp(s) "
+                     f"dropped")
+    order = order[keep]
+    js = [js[i] for i in order]
+    stamp, js_log = stamp[order], js_log[order]
+    offset = int(np.median(js_log - stamp))
+    n_js = len(js)
+    first = js[0].name
+    j = first.index(FRAME_JOINT) if FRAME_JOINT in first else 0
+    if FRAME_JOINT not in first:
+        notes.append(f"joint_states: no {FRAME_JOINT!r} joint; used index 0 ({first[:1]})")
+
+    def pick(seq: Any, default: float = float("nan")) -> float:
+        return float(seq[j]) if len(seq) > j else default
+
+    theta = np.array([pick(s.position) for s in js])
+    theta_dot = np.array([pick(s.velocity) for s in js])
+    if np.isnan(theta_dot).any():
+        ts_s = stamp / _NS
+        theta_dot = np.where(np.isnan(theta_dot),
+                             np.gradient(theta, ts_s) if n_js > 1 else 0.0, theta_dot)
+        notes.append("theta_dot: joint_states without velocity; numerical derivative used")
+    effort = np.array([pick(s.effort) for s in js])
+    torque = effort.copy()
+    if by_role["command"]:
+        cmds = by_role["command"]
+        c_ns = np.array([m.log_time for m in cmds], dtype=np.int64) - offset
+        c_val = np.array([_first(decode(m).data) for m in cmds])
+        o = np.argsort(c_ns, kind="stable")
+        held, have = _zoh(c_ns[o], c_val[o], stamp, np.nan)
+        torque = np.where(have, held, effort)
+        if not have.all():
+            notes.append(f"torque: joint_states effort used for {int((~have).sum())} sample(s) "
+                         f"before the first command")
+    else:
+        notes.append("torque: no command topic; joint_states effort used")
+    if np.isnan(torque).any():
+        torque = np.nan_to_num(torque, nan=0.0)
+        notes.append("torque: unknown samples set to 0")
+
+    n = stamp.size
+    ball_x = np.full(n, np.nan)
+    ball_y = np.full(n, np.nan)
+    phi = np.full(n, np.nan)
+    valid = np.zeros(n, bool)
+    if by_role["ball"]:
+        obs = [decode(m) for m in by_role["ball"]]
+        b_ns = np.array([m.log_time for m in by_role["ball"]], dtype=np.int64) - offset
+        o = np.argsort(b_ns, kind="stable")
+        b_ns = b_ns[o]
+        obs = [obs[i] for i in o]
+        vals = np.array([[b.x, b.y, b.phi, 1.0 if b.valid else 0.0] for b in obs])
+        sel, have = _zoh(b_ns, vals, stamp, np.nan)
+        valid = have & (sel[:, 3] > 0) & np.isfinite(sel[:, 0]) & np.isfinite(sel[:, 1])
+        ball_x = np.where(valid, sel[:, 0], np.nan)
+        ball_y = np.where(valid, sel[:, 1], np.nan)
+        phi = np.where(valid, sel[:, 2], np.nan)
+        bad_phi = valid & ~np.isfinite(phi)
+        if bad_phi.any():
+            phi[bad_phi] = theta[bad_phi] + np.arctan2(ball_x[bad_phi], ball_y[bad_phi])
+            notes.append("ball: phi missing in some observations; theta + atan2(x, y) used")
+    kwargs: dict[str, Any] = {}
+    if by_role["controller"]:
+        cs = [decode(m) for m in by_role["controller"]]
+        c_ns = np.array([c.header.stamp.sec * _NS + c.header.stamp.nanosec for c in cs],
+                        dtype=np.int64)
+        o = np.argsort(c_ns, kind="stable")
+        held, have = _zoh(c_ns[o], np.array([c.phi_dot for c in cs])[o], stamp, np.nan)
+        kwargs["phi_dot"] = np.where(have, held, np.nan)
+    if by_role["truth"]:
+        tr = [decode(m) for m in by_role["truth"]]
+        t_ns = np.array([s.header.stamp.sec * _NS + s.header.stamp.nanosec for s in tr],
+                        dtype=np.int64)
+        o = np.argsort(t_ns, kind="stable")
+        fields = {"theta_true": "theta", "theta_dot_true": "theta_dot", "phi_true": "phi",
+                  "phi_dot_true": "phi_dot", "ball_x_true": "ball_x", "ball_y_true": "ball_y",
+                  "kinetic": "kinetic", "potential": "potential", "energy": "energy"}
+        table = np.array([[getattr(s, f) for f in fields.values()] for s in tr])[o]
+        held, have = _zoh(t_ns[o], table, stamp, np.nan)
+        for c, name in enumerate(fields):
+            col = np.where(have, held[:, c], np.nan)
+            if not np.all(np.isnan(col)):
+                kwargs[name] = col
+    origin = 0
+    if time_origin == "first" or (time_origin == "auto" and stamp[0] > 10**8 * _NS):
+        origin = int(stamp[0])
+    elif time_origin not in ("auto", "absolute", "first"):
+        raise BagError(f"time_origin must be 'auto', 'absolute' or 'first', got {time_origin!r}")
+    t = (stamp - origin) // _NS + ((stamp - origin) % _NS) / _NS
+    meta: dict[str, Any] = {}
+    if _META_NAME in contents.metadata:
+        try:
+            meta = json.loads(contents.metadata[_META_NAME].get("meta", "{}"))
+        except json.JSONDecodeError:
+            notes.append("bag: bfr_recording metadata is not valid JSON; ignored")
+    original_source = meta.get("source")
+    meta["source"] = str(p)
+    meta["source_kind"] = "bag" if not meta.get("source_kind") else meta["source_kind"]
+    if original_source is not None and original_source != str(p):
+        meta["original_source"] = original_source
+    meta["bag_storage"] = contents.storage
+    meta["bag_complete"] = contents.complete
+    meta["bag_topics"] = {r: names[r] for r in names if by_role[r]}
+    meta["time_origin_ns"] = origin
+    meta["warnings"] = [*meta.get("warnings", []), *contents.warnings]
+    meta["notes"] = [*meta.get("notes", []), *notes]
+    extra: dict[str, np.ndarray] = {}
+    if _EXTRA_ATTACHMENT in contents.attachments:
+        with np.load(io.BytesIO(contents.attachments[_EXTRA_ATTACHMENT])) as npz:
+            for k in npz.files:
+                if npz[k].shape == (n,):
+                    extra[k] = npz[k]
+    try:
+        rec = Recording(t=t, theta=theta, theta_dot=theta_dot, torque=torque, ball_x=ball_x,
+                        ball_y=ball_y, ball_valid=valid, phi=phi, extra=extra, meta=meta,
+                        **kwargs)
+    except RecordingError as exc:
+        raise BagError(f"{contents.path}: {exc}") from exc
+    rec.meta["sample_rate"] = rec.sample_rate()
+    rec.meta["camera_fix_rate"] = rec.camera_fix_rate()
+    return rec

@@ -1,0 +1,267 @@
+"""The simulator's CSV format, to and from :class:`~bfr_model.recording.Recording`.
+
+Format
+------
+- Optional comment lines starting with ``#`` (anywhere; blank lines are ignored too). Lines
+  of the form ``# key: value`` before the header are metadata; ``value`` is JSON when it
+  parses as JSON, else a string.
+- One header row naming the columns, comma separated. Required columns (any order):
+  ``t, theta, theta_dot, phi, phi_dot, ball_x, ball_y, torque`` [s, rad, rad/s, rad, rad/s,
+  m, m, N m]; optional ``kinetic, potential, energy`` [J]; any further columns are kept in
+  ``Recording.extra`` (or fill the optional recording fields of the same name).
+- One row per sample, numbers in Python/C float syntax; ``nan`` marks a missing value.
+
+``phi`` and ``phi_dot`` are the simulator's **state** (the contact-point angle; ``bfr
+simulate`` writes this) unless the metadata says ``# phi_kind: "ball_centre"``. Reading a
+contact-angle file puts them into ``phi_true`` / ``phi_dot_true`` and computes the
+recording's ``phi`` (ball-centre angle) from ``theta, ball_x, ball_y``, unless a
+``phi_ball`` column holds it. A ``ball_valid`` column (0/1) is optional; without it a sample
+is valid where ``ball_x`` and ``ball_y`` are finite.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bfr_model.recording import OPTIONAL_FIELDS, Recording, RecordingError, ball_centre_angle
+
+__all__ = ["CSV_COLUMNS", "CsvFormatError", "read_csv", "write_csv"]
+
+#: Documented column order of the simulator's CSV.
+CSV_COLUMNS = ("t", "theta", "theta_dot", "phi", "phi_dot", "ball_x", "ball_y", "torque",
+               "kinetic", "potential", "energy")
+REQUIRED_COLUMNS = CSV_COLUMNS[:8]
+
+
+class CsvFormatError(RecordingError):
+    """A CSV recording is malformed; the message names the file, line and column."""
+
+
+def _meta_value(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except (json.JSONDecodeError, ValueError):
+        return text
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, float) and not math.isfinite(value):
+        return str(value)
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, (np.floating, np.integer, np.bool_)):
+        return _jsonable(value.item())
+    return value
+
+
+def write_csv(path: str | Path, rec: Recording, *, meta: bool = True,
+              precision: int = 17) -> None:
+    """Write a recording in the simulator's CSV format.
+
+    With ground truth (``rec.has_truth``) the ``phi``/``phi_dot`` columns hold the
+    contact-point state (``phi_true``/``phi_dot_true``) and the ball-centre ``phi`` goes to
+    a ``phi_ball`` column; otherwise they hold ``phi``/``phi_dot`` and the metadata says
+    ``phi_kind: "ball_centre"``. Other optional arrays and ``extra`` become extra columns;
+    ``ball_valid`` is written as 0/1.
+
+    Parameters
+    ----------
+    path : str or Path
+        Output file.
+    rec : Recording
+        The recording.
+    meta : bool
+        Write ``rec.meta`` as ``# key: json`` comment lines.
+    precision : int
+        Significant digits (17 round-trips float64 exactly).
+    """
+    n = len(rec)
+    nan = np.full(n, np.nan)
+    cols: dict[str, np.ndarray] = {"t": rec.t, "theta": rec.theta, "theta_dot": rec.theta_dot}
+    truth = rec.has_truth
+    if truth:
+        cols["phi"] = rec.phi_true  # type: ignore[assignment]
+        cols["phi_dot"] = rec.phi_dot_true if rec.phi_dot_true is not None else nan
+    else:
+        cols["phi"] = rec.phi
+        cols["phi_dot"] = rec.phi_dot if rec.phi_dot is not None else nan
+    cols.update(ball_x=rec.ball_x, ball_y=rec.ball_y, torque=rec.torque)
+    for name in ("kinetic", "potential", "energy"):
+        value = getattr(rec, name)
+        cols[name] = value if value is not None else nan
+    cols["ball_valid"] = rec.ball_valid.astype(float)
+    if truth:
+        cols["phi_ball"] = rec.phi
+        if rec.phi_dot is not None:
+            cols["phi_dot_ball"] = rec.phi_dot
+    for name in OPTIONAL_FIELDS:
+        value = getattr(rec, name)
+        if value is not None and name not in cols and name not in (
+                "phi_dot", "phi_true", "phi_dot_true"):
+            cols[name] = value
+    for name, value in rec.extra.items():
+        key = name if name not in cols else f"extra_{name}"
+        cols[key] = value
+    header_meta = dict(rec.meta)
+    header_meta["phi_kind"] = "contact" if truth else "ball_centre"
+    fmt = f"%.{precision}g"
+    data = np.column_stack(list(cols.values()))
+    p = Path(path)
+    with p.open("w", encoding="utf-8", newline="\n") as fh:
+        if meta:
+            for key, value in header_meta.items():
+                fh.write(f"# {key}: {json.dumps(_jsonable(value), default=str)}\n")
+        fh.write(",".join(cols) + "\n")
+        np.savetxt(fh, data, delimiter=",", fmt=fmt)
+
+
+def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
+    """Read a CSV recording (see the module doc for the format).
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    phi_kind : {"contact", "ball_centre"}, optional
+        Override the meaning of the ``phi`` column (default: the ``phi_kind`` metadata,
+        else ``"contact"`` as ``bfr simulate`` writes).
+
+    Raises
+    ------
+    CsvFormatError
+        Missing file, no header, missing required columns, a row with the wrong number of
+        fields (e.g. a truncated last line), a non-numeric cell, or invalid recording data
+        (the message names the line and column).
+    """
+    p = Path(path)
+    try:
+        text = p.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise CsvFormatError(f"{p}: cannot read: {exc}") from exc
+    meta: dict[str, Any] = {}
+    header: list[str] | None = None
+    header_line = 0
+    rows: list[list[str]] = []
+    row_lines: list[int] = []
+    lines = text.split("\n")
+    ends_with_newline = text.endswith("\n")
+    if lines and lines[-1] == "":
+        lines.pop()
+    for i, raw in enumerate(lines):
+        line = raw.strip()
+        if not line:
+            continue
+        if line.startswith("#"):
+            if header is None and ":" in line:
+                key, _, value = line[1:].partition(":")
+                meta[key.strip()] = _meta_value(value.strip())
+            continue
+        if header is None:
+            header = [c.strip() for c in line.split(",")]
+            header_line = i + 1
+            continue
+        cells = line.split(",")
+        if len(cells) != len(header):
+            last = i == len(lines) - 1
+            hint = (" (truncated last line" + ("" if ends_with_newline else
+                                              ", no newline at end of file") + ")"
+                    if last and len(cells) < len(header) else "")
+            raise CsvFormatError(f"{p}:{i + 1}: row has {len(cells)} field(s), the header "
+                                 f"(line {header_line}) has {len(header)}{hint}")
+        rows.append(cells)
+        row_lines.append(i + 1)
+    if header is None:
+        raise CsvFormatError(f"{p}: no header row (file is empty or only comments)")
+    dup = sorted({c for c in header if header.count(c) > 1})
+    if dup:
+        raise CsvFormatError(f"{p}:{header_line}: duplicate column(s) {dup}")
+    missing = [c for c in REQUIRED_COLUMNS if c not in header]
+    if missing:
+        raise CsvFormatError(f"{p}:{header_line}: missing required column(s) {missing}; "
+                             f"found {header}")
+    if not rows:
+        raise CsvFormatError(f"{p}: no data rows after the header (line {header_line})")
+    try:
+        data = np.array(rows, dtype=np.float64)
+    except ValueError:
+        for cells, ln in zip(rows, row_lines, strict=True):
+            for name, cell in zip(header, cells, strict=True):
+                try:
+                    float(cell)
+                except ValueError:
+                    raise CsvFormatError(f"{p}:{ln}: column {name!r}: non-numeric cell "
+                                         f"{cell.strip()!r}") from None
+        raise  # pragma: no cover - the loop above raises
+    col = {name: data[:, j] for j, name in enumerate(header)}
+    kind = phi_kind or meta.get("phi_kind", "contact")
+    if kind not in ("contact", "ball_centre"):
+        raise CsvFormatError(f"{p}: phi_kind must be 'contact' or 'ball_centre', got {kind!r}")
+    if "ball_valid" in col:
+        valid = col["ball_valid"] != 0
+    else:
+        valid = np.isfinite(col["ball_x"]) & np.isfinite(col["ball_y"])
+    kwargs: dict[str, Any] = {name: col[name] for name in
+                              ("t", "theta", "theta_dot", "torque", "ball_x", "ball_y")}
+    kwargs["ball_valid"] = valid
+    used = {*REQUIRED_COLUMNS, "ball_valid", "kinetic", "potential", "energy"}
+    if kind == "contact":
+        kwargs["phi_true"] = col["phi"]
+        kwargs["phi_dot_true"] = col["phi_dot"]
+        if "phi_ball" in col:
+            kwargs["phi"] = col["phi_ball"]
+            used.add("phi_ball")
+        else:
+            kwargs["phi"] = np.where(valid, ball_centre_angle(col["theta"], col["ball_x"],
+                                                              col["ball_y"], near=col["phi"]),
+                                     np.nan)
+        if "phi_dot_ball" in col:
+            kwargs["phi_dot"] = col["phi_dot_ball"]
+            used.add("phi_dot_ball")
+        kwargs.setdefault("theta_true", col["theta"].copy())
+        kwargs.setdefault("theta_dot_true", col["theta_dot"].copy())
+        kwargs.setdefault("ball_x_true", col["ball_x"].copy())
+        kwargs.setdefault("ball_y_true", col["ball_y"].copy())
+    else:
+        kwargs["phi"] = col["phi"]
+        kwargs["phi_dot"] = None if np.all(np.isnan(col["phi_dot"])) else col["phi_dot"]
+    for name in ("kinetic", "potential", "energy"):
+        if name in col and not np.all(np.isnan(col[name])):
+            kwargs[name] = col[name]
+    extra: dict[str, np.ndarray] = {}
+    for name in header:
+        if name in used:
+            continue
+        if name in OPTIONAL_FIELDS:
+            kwargs[name] = col[name]
+        else:
+            extra[name[len("extra_"):] if name.startswith("extra_") else name] = col[name]
+    meta_out = dict(meta)
+    meta_out.pop("phi_kind", None)
+    conversions = list(meta_out.get("conversions", []))
+    meta_out["conversions"] = conversions
+    meta_out["source"] = str(p)
+    meta_out.setdefault("source_kind", "csv")
+    meta_out["csv_phi_kind"] = kind
+    if kind == "contact" and "phi_ball" not in col:
+        conversions.append("csv: phi/phi_dot columns (contact-point state) read into "
+                           "phi_true/phi_dot_true; phi = theta + atan2(ball_x, ball_y)")
+    try:
+        rec = Recording(extra=extra, meta=meta_out, **kwargs)
+    except RecordingError as exc:
+        msg = str(exc)
+        # Name the file line for sample-indexed errors.
+
+        m = re.search(r"sample (\d+)", msg)
+        where = f"{p}:{row_lines[int(m.group(1))]}" if m and int(m.group(1)) < len(
+            row_lines) else str(p)
+        raise CsvFormatError(f"{where}: {msg}") from exc
+    rec.meta.setdefault("sample_rate", rec.sample_rate())
+    return rec

@@ -1,0 +1,599 @@
+"""Parser of the NTNU Butterfly rig's terminal logs (``../shared/data/ntnu-rig/*.txt``).
+
+Each data line reads::
+
+    [inf] t=<s>,torque=<N m>,theta=<rad>,phi=<rad>,dtheta=<rad/s>,dphi=<rad/s>,x=<m>,y=<m>
+
+Everything else (``script`` headers, shell prompts, ANSI escape codes, carriage returns,
+build output, ``[obs]`` lines, other ``[inf]`` messages) is noise: it is skipped and counted
+per reason in :attr:`RigLog.skipped`. ``[inf] initializing hardware..`` starts a new run
+(one file may hold several runs whose clocks restart, e.g. ``step_response_tau_001``);
+``[inf] ball was lost`` marks the held camera fix as stale.
+
+The conventions of these logs were inferred from the data (docs/ntnu-rig-conventions.md,
+``python -m bfr_model.io.rig_conventions``) and are applied by :func:`run_to_recording`:
+
+- ``theta`` has our sign (counter-clockwise positive, theta and phi advance together) and
+  its zero agrees with ours modulo pi; it is printed with 6 significant digits, so its
+  resolution is 1 mrad for |theta| in [100, 1000) rad and 10 mrad above.
+- ``torque`` has our sign: a positive command accelerates ``theta`` positive.
+- ``x, y`` are the camera's ball centre in the world frame [m] (0, 0 = no ball), held
+  between camera frames (165 Hz against a ~920 Hz loop). At start-up the camera's queued
+  frames are replayed at the loop rate for ~0.9 s (a backlog since program start): those
+  fixes are stale and are marked invalid.
+- The rig's ``phi`` equals ``theta[k - 8] + atan2(x, y)`` at each new fix k: the software
+  pairs each image with the frame angle logged 8 samples (~8.7 ms) earlier. ``phi`` of the
+  recording is recomputed this way (full precision of x, y; defined before the rig's phi
+  estimator initialises, when the rig logs ``phi = atan2(x, y)`` alone).
+- ``dtheta`` is the servo's velocity estimate, the derivative of ``theta`` delayed by
+  ~6.4 ms; ``dphi`` is a filtered derivative of ``phi`` updated at each fix.
+
+Pure Python + numpy; no ``rclpy``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import re
+import time
+import warnings
+from collections import Counter
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bfr_model.recording import Recording
+
+__all__ = [
+    "KEYS",
+    "RigLog",
+    "RigLogError",
+    "RigLogWarning",
+    "RigRun",
+    "parse_rig_log",
+    "parse_rig_log_text",
+    "read_rig_log",
+    "run_to_recording",
+]
+
+#: Keys of a data line, in order, with their units.
+KEYS = ("t", "torque", "theta", "phi", "dtheta", "dphi", "x", "y")
+UNITS = {"t": "s", "torque": "N m", "theta": "rad", "phi": "rad", "dtheta": "rad/s",
+         "dphi": "rad/s", "x": "m", "y": "m"}
+
+#: Samples between the frame angle the rig pairs with an image and the image's arrival.
+RIG_PHI_THETA_LAG_SAMPLES = 8
+#: Delay of the logged ``dtheta`` behind the derivative of ``theta`` [s] (measured).
+RIG_DTHETA_DELAY_S = 0.0064
+
+_DATA_RE = re.compile(
+    r"\[inf\] t=([^,]*),torque=([^,]*),theta=([^,]*),phi=([^,]*),"
+    r"dtheta=([^,]*),dphi=([^,]*),x=([^,]*),y=([^,]*)")
+_ANSI_RE = re.compile(r"\x1b\][^\x07\x1b]*(?:\x07|\x1b\\)?|\x1b\[[0-?]*[ -/]*[@-~]|\x1b[@-_]")
+_CTRL_RE = re.compile(r"[\x00-\x08\x0b-\x1f\x7f]")
+
+
+class RigLogError(ValueError):
+    """A rig log cannot be parsed; the message names the file, line and problem."""
+
+
+class RigLogWarning(UserWarning):
+    """A recoverable oddity in a rig log (e.g. a truncated final line)."""
+
+
+@dataclass
+class RigRun:
+    """The raw data lines of one run (between two ``initializing hardware`` markers).
+
+    Attributes
+    ----------
+    data : ndarray, shape (n, 8)
+        Values in the order of :data:`KEYS`, as logged (rig conventions and units).
+    lines : ndarray of int, shape (n,)
+        1-based line number of each sample in the file.
+    events : list of (int, str)
+        ``(sample index, message)`` of ``[inf]`` messages inside the run (e.g. ``ball was
+        lost``); the index is that of the first sample after the message.
+    dropped_duplicates : int
+        Samples dropped because their timestamp repeated the previous one.
+    """
+
+    data: NDArray[np.float64]
+    lines: NDArray[np.int64]
+    events: list[tuple[int, str]] = field(default_factory=list)
+    dropped_duplicates: int = 0
+
+    def column(self, key: str) -> NDArray[np.float64]:
+        """One raw column by key (see :data:`KEYS`)."""
+        return self.data[:, KEYS.index(key)]
+
+    def __len__(self) -> int:
+        """Number of samples."""
+        return int(self.data.shape[0])
+
+
+@dataclass
+class RigLog:
+    """A parsed rig log: its runs, the skipped lines by reason, and warnings.
+
+    Attributes
+    ----------
+    source : str
+        Path (or label) of the parsed text.
+    n_lines : int
+        Lines in the file.
+    n_data : int
+        Data lines parsed (including duplicates later dropped).
+    skipped : dict of str to int
+        Skipped lines per reason: ``empty``, ``terminal`` (prompts, escape codes, build
+        output), ``info`` (other ``[inf]`` messages), ``obs`` (``[obs]`` lines),
+        ``partial`` (a data line cut short by another line), ``truncated_final`` (the last
+        line cut off), ``duplicate_time`` (samples dropped for a repeated timestamp).
+    warnings : list of str
+        Recoverable problems with their line numbers.
+    runs : list of RigRun
+        Runs in file order.
+    """
+
+    source: str
+    n_lines: int
+    n_data: int
+    skipped: dict[str, int]
+    warnings: list[str]
+    runs: list[RigRun]
+
+    def run_index(self, run: int | None) -> int:
+        """Resolve a run selector: None is the longest run, negative counts from the end."""
+        if run is None:
+            return int(np.argmax([len(r) for r in self.runs]))
+        k = run + len(self.runs) if run < 0 else run
+        if not 0 <= k < len(self.runs):
+            raise RigLogError(f"{self.source}: run {run} requested but the log holds "
+                              f"{len(self.runs)} run(s)")
+        return k
+
+    def recording(self, run: int | None = None, **options: Any) -> Recording:
+        """The selected run as a :class:`Recording` in our conventions.
+
+        Parameters
+        ----------
+        run : int, optional
+            Run index (default: the longest run).
+        **options
+            Passed to :func:`run_to_recording`.
+        """
+        k = self.run_index(run)
+        rec = run_to_recording(self.runs[k], source=self.source, **options)
+        rec.meta.update({
+            "run": k,
+            "runs": len(self.runs),
+            "run_lengths": [len(r) for r in self.runs],
+            "lines": self.n_lines,
+            "data_lines": self.n_data,
+            "skipped": dict(self.skipped),
+            "parse_warnings": list(self.warnings),
+        })
+        if len(self.runs) > 1:
+            rec.meta["notes"].append(
+                f"the log holds {len(self.runs)} runs (clock restarts); run {k} selected")
+        return rec
+
+
+def _float_or_error(text: str, key: str, where: str) -> float:
+    try:
+        return float(text)
+    except ValueError:
+        raise RigLogError(f"{where}: value of {key!r} is not a number: {text!r}") from None
+
+
+def _classify_malformed(line: str) -> tuple[str, str]:
+    """Classify a line that starts like a data line but does not match it.
+
+    Returns ``("partial", detail)`` when it is a cut-off prefix of a data line and
+    ``("malformed", detail)`` when keys are missing, unknown or out of order.
+    """
+    body = line[len("[inf] "):]
+    parts = body.split(",")
+    keys = [p.split("=", 1)[0] for p in parts]
+    if len(keys) <= len(KEYS) and keys[:-1] == list(KEYS[: len(keys) - 1]) and \
+            KEYS[len(keys) - 1].startswith(keys[-1]):
+        return "partial", f"cut after {len(keys) - 1} complete field(s)"
+    missing = [k for k in KEYS if k not in keys]
+    unknown = [k for k in keys if k not in KEYS]
+    if missing:
+        return "malformed", f"missing key(s) {', '.join(map(repr, missing))}"
+    if unknown:
+        return "malformed", f"unknown key(s) {', '.join(map(repr, unknown))}"
+    return "malformed", f"keys out of order or repeated: {keys}"
+
+
+def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
+                       duplicates: str = "drop") -> RigLog:
+    """Parse the text of a rig log.
+
+    Parameters
+    ----------
+    text : str or bytes
+        The log (bytes are decoded as UTF-8, undecodable bytes replaced).
+    source : str
+        Name used in messages and ``meta["source"]``.
+    duplicates : {"drop", "error"}
+        What to do with a sample whose timestamp equals the previous one. The rig prints
+        ``t`` with 6 significant digits (0.1 ms above 10 s) and its loop sometimes runs two
+        steps within one print quantum, so real logs hold a few (17-35 per file); ``"drop"``
+        keeps the first and counts the rest in ``skipped["duplicate_time"]``.
+
+    Returns
+    -------
+    RigLog
+
+    Raises
+    ------
+    RigLogError
+        Empty text, no data line, a data line with missing or unknown keys, a non-numeric,
+        NaN or infinite value, time going backwards inside a run (no restart marker) or,
+        with ``duplicates="error"``, a repeated timestamp. The message names the line.
+    """
+    if duplicates not in ("drop", "error"):
+        raise ValueError(f"duplicates must be 'drop' or 'error', got {duplicates!r}")
+    if isinstance(text, bytes):
+        text = text.decode("utf-8", errors="replace")
+    if not text.strip():
+        raise RigLogError(f"{source}: file is empty (no data lines)")
+    lines = text.split("\n")
+    if lines and lines[-1] == "":
+        lines.pop()  # text ended with a newline
+    ends_with_newline = text.endswith("\n")
+    last_nonempty = max((i for i, ln in enumerate(lines) if ln.strip("\r \t")), default=-1)
+
+    skipped: Counter[str] = Counter()
+    warns: list[str] = []
+    runs_rows: list[list[tuple[str, ...]]] = [[]]
+    runs_lines: list[list[int]] = [[]]
+    runs_events: list[list[tuple[int, str]]] = [[]]
+    new_run_pending = False
+    fullmatch = _DATA_RE.fullmatch
+
+    def add_data(groups: tuple[str, ...], lineno: int) -> None:
+        nonlocal new_run_pending
+        if new_run_pending and runs_rows[-1]:
+            runs_rows.append([])
+            runs_lines.append([])
+            runs_events.append([])
+        new_run_pending = False
+        runs_rows[-1].append(groups)
+        runs_lines[-1].append(lineno)
+
+    for i, raw in enumerate(lines):
+        lineno = i + 1
+        line = raw[:-1] if raw.endswith("\r") else raw
+        m = fullmatch(line)
+        if m is not None:
+            add_data(m.groups(), lineno)
+            continue
+        # Slow path: noise, or a data line wrapped in escape codes / carriage returns.
+        clean = _ANSI_RE.sub("", line)
+        if "\r" in clean:  # a carriage return: the text after it is what the terminal shows
+            tail = clean.rsplit("\r", 1)[-1]
+            clean = tail if tail.strip() else clean.replace("\r", "")
+        clean = _CTRL_RE.sub("", clean).strip()
+        m = fullmatch(clean)
+        if m is not None:
+            add_data(m.groups(), lineno)
+            continue
+        if not clean:
+            skipped["empty"] += 1
+            continue
+        if clean.startswith("[obs]"):
+            skipped["obs"] += 1
+            continue
+        pos = clean.find("[inf] t=")
+        if pos >= 0:
+            segments = [s for s in clean[pos:].split("[inf] ")[1:] if s]
+            for j, seg in enumerate(segments):
+                seg_line = "[inf] " + seg
+                m = fullmatch(seg_line)
+                if m is not None:
+                    add_data(m.groups(), lineno)
+                    continue
+                is_last = i == last_nonempty and j == len(segments) - 1
+                kind, detail = _classify_malformed(seg_line)
+                if kind == "partial" and is_last:
+                    skipped["truncated_final"] += 1
+                    msg = (f"{source}:{lineno}: truncated final line skipped ({detail}"
+                           f"{'' if ends_with_newline else ', no newline at end of file'})")
+                    warns.append(msg)
+                elif kind == "partial":
+                    skipped["partial"] += 1
+                    warns.append(f"{source}:{lineno}: partial data line skipped ({detail})")
+                else:
+                    raise RigLogError(f"{source}:{lineno}: malformed data line: {detail}: "
+                                      f"{seg_line[:120]!r}")
+            continue
+        if clean.startswith("[inf]"):
+            skipped["info"] += 1
+            msg = clean[len("[inf]"):].strip()
+            if msg.startswith("initializing hardware"):
+                new_run_pending = True
+            elif msg.startswith("stopped"):
+                new_run_pending = True
+            else:
+                runs_events[-1].append((len(runs_rows[-1]), msg))
+            continue
+        skipped["terminal"] += 1
+
+    n_data = sum(len(r) for r in runs_rows)
+    if n_data == 0:
+        counts = ", ".join(f"{k}: {v}" for k, v in sorted(skipped.items()) if v) or "none"
+        raise RigLogError(f"{source}: no data lines ('[inf] t=...,torque=...,...') among "
+                          f"{len(lines)} line(s); skipped {counts}")
+
+    runs: list[RigRun] = []
+    for rows, lns, run_events in zip(runs_rows, runs_lines, runs_events, strict=True):
+        events = run_events
+        if not rows:
+            continue
+        lnarr = np.asarray(lns, dtype=np.int64)
+        try:
+            data = np.array(rows, dtype=np.float64)
+        except ValueError:
+            for row, ln in zip(rows, lns, strict=True):
+                for key, val in zip(KEYS, row, strict=True):
+                    _float_or_error(val, key, f"{source}:{ln}")
+            raise  # pragma: no cover - the loop above raises
+        bad = ~np.isfinite(data)
+        if bad.any():
+            r, c = np.argwhere(bad)[0]
+            raise RigLogError(f"{source}:{lnarr[r]}: non-finite value {KEYS[c]}="
+                              f"{rows[r][c]!r} ({int(bad.sum())} non-finite value(s) in "
+                              f"this run)")
+        t = data[:, 0]
+        dt = np.diff(t)
+        back = np.nonzero(dt < 0)[0]
+        if back.size:
+            k = int(back[0])
+            raise RigLogError(
+                f"{source}:{lnarr[k + 1]}: time goes backwards from t={float(t[k])!r} (line "
+                f"{lnarr[k]}) to t={float(t[k + 1])!r} without a restart marker "
+                f"('[inf] initializing hardware..')")
+        dup = np.nonzero(dt == 0)[0] + 1
+        if dup.size and duplicates == "error":
+            k = int(dup[0])
+            raise RigLogError(f"{source}:{lnarr[k]}: duplicate timestamp t={float(t[k])!r} "
+                              f"(same as "
+                              f"line {lnarr[k - 1]}); {dup.size} duplicate(s) in this run")
+        if dup.size:
+            keep = np.ones(t.shape[0], bool)
+            keep[dup] = False
+            events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in events]
+            data, lnarr = data[keep], lnarr[keep]
+            skipped["duplicate_time"] += int(dup.size)
+        runs.append(RigRun(data=data, lines=lnarr, events=events,
+                           dropped_duplicates=int(dup.size)))
+    skipped_out = {k: v for k, v in skipped.items() if v}
+    return RigLog(source=source, n_lines=len(lines), n_data=n_data, skipped=skipped_out,
+                  warnings=warns, runs=runs)
+
+
+def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
+                  warn: bool = True) -> RigLog:
+    """Read and parse a rig log file; see :func:`parse_rig_log_text`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.txt`` terminal log.
+    duplicates : {"drop", "error"}
+        Policy for repeated timestamps.
+    warn : bool
+        Emit a :class:`RigLogWarning` for each recoverable problem (truncated final line,
+        partial lines); they are always listed in :attr:`RigLog.warnings`.
+    """
+    p = Path(path)
+    try:
+        raw = p.read_bytes()
+    except OSError as exc:
+        raise RigLogError(f"{p}: cannot read: {exc}") from exc
+    log = parse_rig_log_text(raw, source=str(p), duplicates=duplicates)
+    if warn:
+        for msg in log.warnings:
+            warnings.warn(msg, RigLogWarning, stacklevel=2)
+    return log
+
+
+def read_rig_log(path: str | Path, run: int | None = None, *, duplicates: str = "drop",
+                 warn: bool = True, **options: Any) -> Recording:
+    """Read one run of a rig log as a :class:`Recording` in our conventions.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.txt`` terminal log.
+    run : int, optional
+        Run index when the log holds several (default: the longest).
+    duplicates : {"drop", "error"}
+        Policy for repeated timestamps (see :func:`parse_rig_log_text`).
+    warn : bool
+        Emit warnings for recoverable problems.
+    **options
+        Passed to :func:`run_to_recording` (``rebase_turns``, ``stale_after``,
+        ``phi_theta_lag``, ``camera_offset``, ``drop_backlog``).
+    """
+    return parse_rig_log(path, duplicates=duplicates, warn=warn).recording(run, **options)
+
+
+def _camera_backlog_end(new_fix_idx: NDArray[np.intp], min_burst: int = 10,
+                        steady: int = 10) -> int:
+    """Sample index where the start-up replay of queued camera frames ends (0 if none).
+
+    The backlog shows as new fixes on consecutive samples; it ends at the first fix after
+    which ``steady`` gaps in a row span two samples or more.
+    """
+    if new_fix_idx.size < min_burst + steady:
+        return 0
+    gaps = np.diff(new_fix_idx)
+    if np.count_nonzero(gaps[: min_burst * 4] == 1) < min_burst:
+        return 0
+    ok = (gaps >= 2).astype(np.int64)
+    run_len = np.convolve(ok, np.ones(steady, np.int64), mode="valid")
+    j = np.nonzero(run_len == steady)[0]
+    if j.size == 0:
+        return int(new_fix_idx[-1]) + 1
+    return int(new_fix_idx[j[0] + 1])
+
+
+def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bool = True,
+                     stale_after: float = 0.1,
+                     phi_theta_lag: int = RIG_PHI_THETA_LAG_SAMPLES,
+                     camera_offset: tuple[float, float] = (0.0, 0.0),
+                     drop_backlog: bool = True) -> Recording:
+    """Convert one raw run to a :class:`Recording` in our conventions.
+
+    Parameters
+    ----------
+    run : RigRun
+        Raw run from :func:`parse_rig_log`.
+    source : str
+        Provenance for ``meta["source"]``.
+    rebase_turns : bool
+        Subtract the whole number of turns ``2 pi k`` nearest to the first ``theta`` from
+        ``theta`` and ``phi`` (physically identical; smaller numbers).
+    stale_after : float
+        A held fix older than this [s] is invalid (normal gaps are <= 11 ms). Also after an
+        ``[inf] ball was lost`` message until the next new fix.
+    phi_theta_lag : int
+        Samples between a fix's arrival and the frame angle paired with it in ``phi``
+        (the rig's software uses 8).
+    camera_offset : (float, float)
+        Camera origin offset ``(cx, cy)`` [m] subtracted from ``x, y`` (default: none; the
+        measured offsets are in docs/ntnu-rig-conventions.md).
+    drop_backlog : bool
+        Mark the start-up replay of queued camera frames invalid.
+    """
+    d = run.data
+    t = d[:, 0].copy()
+    torque, theta_raw, phi_rig, dtheta, dphi, x, y = (d[:, k].copy() for k in range(1, 8))
+    n = t.shape[0]
+    idx = np.arange(n)
+    seen = ~((x == 0.0) & (y == 0.0))
+    changed = np.ones(n, bool)
+    changed[1:] = (x[1:] != x[:-1]) | (y[1:] != y[:-1]) | ~seen[:-1]
+    new_fix = seen & changed
+    fix_idx = np.nonzero(new_fix)[0]
+    conversions: list[str] = []
+    notes: list[str] = []
+
+    backlog_end = _camera_backlog_end(fix_idx) if drop_backlog else 0
+    last_fix = np.maximum.accumulate(np.where(new_fix, idx, -1))
+    has_fix = last_fix >= 0
+    age = np.where(has_fix, t - t[np.maximum(last_fix, 0)], np.inf)
+    valid = seen & has_fix & (age <= stale_after) & (idx >= backlog_end)
+    lost = np.zeros(n, bool)
+    for e, msg in run.events:
+        if msg.startswith("ball was lost") and e < n:
+            nxt = fix_idx[fix_idx >= e]
+            end = int(nxt[0]) if nxt.size else n
+            lost[e:end] = True
+    valid &= ~lost
+    if backlog_end > 0:
+        notes.append(f"camera backlog: fixes before t = {t[min(backlog_end, n - 1)]:.4f} s "
+                     f"arrived at the loop rate (frames queued since program start) and are "
+                     f"marked invalid")
+    if lost.any():
+        notes.append(f"'ball was lost' reported; {int(lost.sum())} held sample(s) invalid")
+    stale = seen & has_fix & (age > stale_after)
+    if stale.any():
+        notes.append(f"{int(stale.sum())} sample(s) hold a fix older than {stale_after} s: "
+                     f"invalid")
+
+    cx, cy = float(camera_offset[0]), float(camera_offset[1])
+    bx, by = x - cx, y - cy
+    if cx or cy:
+        conversions.append(f"subtracted camera offset (cx, cy) = ({cx}, {cy}) m from x, y")
+
+    shift = 0.0
+    if rebase_turns:
+        shift = 2.0 * math.pi * round(theta_raw[0] / (2.0 * math.pi))
+        if shift:
+            conversions.append(f"theta and phi rebased by -2 pi * {round(shift / (2 * math.pi))}"
+                               f" = {-shift!r} rad (whole turns; physically identical)")
+    theta = theta_raw - shift
+
+    lag_src = np.maximum(idx - int(phi_theta_lag), 0)
+    phi_fix = theta[lag_src] + np.arctan2(bx, by)
+    phi = np.where(valid, phi_fix[np.maximum(last_fix, 0)], np.nan)
+    conversions.append(f"phi recomputed as theta[k - {phi_theta_lag}] + atan2(x, y) at each "
+                       f"new fix k and held (the rig's own pairing); rig phi kept in "
+                       f"extra['phi_rig']")
+    phi_rig_ours = np.where(seen, phi_rig - shift, np.nan)
+    initialised = np.abs(phi_rig_ours - phi) < 0.5
+    phi_dot = np.where(valid & initialised, dphi, np.nan)
+    conversions.append("phi_dot = rig dphi where the ball is valid and the rig's phi "
+                       "estimator is initialised, else NaN")
+    conversions.append("theta, theta_dot (rig dtheta), torque, x, y: rig sign and units "
+                       "already match ours (no change)")
+
+    magnitude = float(np.max(np.abs(theta_raw)))
+    theta_res = 10.0 ** (math.floor(math.log10(magnitude)) - 5) if magnitude > 0 else 1e-6
+    rec = Recording(
+        t=t, theta=theta, theta_dot=dtheta, torque=torque, ball_x=bx, ball_y=by,
+        ball_valid=valid, phi=phi, phi_dot=phi_dot,
+        extra={"phi_rig": phi_rig_ours, "dphi_rig": dphi, "ball_seen": seen.astype(float)},
+        meta={
+            "source": source,
+            "source_kind": "ntnu_rig_log",
+            "conversions": conversions,
+            "notes": notes,
+            "units": {"phi_rig": "rad", "dphi_rig": "rad/s", "ball_seen": "-"},
+            "first_line": int(run.lines[0]),
+            "last_line": int(run.lines[-1]),
+            "dropped_duplicates": run.dropped_duplicates,
+            "events": [(float(t[min(e, n - 1)]), msg) for e, msg in run.events],
+            "theta_turn_shift": shift,
+            "theta_resolution": theta_res,
+            "camera_backlog_end_t": float(t[min(backlog_end, n - 1)]) if backlog_end else None,
+            "rig_conventions": {
+                "theta_sign": 1,
+                "torque_sign": 1,
+                "xy_frame": "world",
+                "phi_theta_lag_samples": int(phi_theta_lag),
+                "dtheta_delay_s": RIG_DTHETA_DELAY_S,
+                "stale_after_s": float(stale_after),
+                "doc": "docs/ntnu-rig-conventions.md",
+            },
+        },
+    )
+    rec.meta["sample_rate"] = rec.sample_rate()
+    rec.meta["camera_fix_rate"] = rec.camera_fix_rate()
+    return rec
+
+
+def _main(argv: list[str] | None = None) -> int:
+    """``python -m bfr_model.io.rig_log FILE...``: print a parse summary per file."""
+    ap = argparse.ArgumentParser(prog="python -m bfr_model.io.rig_log",
+                                 description="Parse NTNU rig logs and print a JSON summary.")
+    ap.add_argument("files", nargs="+", type=Path)
+    args = ap.parse_args(argv)
+    for f in args.files:
+        t0 = time.perf_counter()
+        try:
+            log = parse_rig_log(f, warn=False)
+        except RigLogError as exc:
+            print(json.dumps({"file": str(f), "error": str(exc)}))
+            continue
+        dt = time.perf_counter() - t0
+        rec = log.recording()
+        out = {"file": f.name, "parse_s": round(dt, 3), "lines": log.n_lines,
+               "data_lines": log.n_data, "skipped": log.skipped, "runs": len(log.runs),
+               "warnings": log.warnings, **rec.summary()}
+        print(json.dumps(out))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(_main())

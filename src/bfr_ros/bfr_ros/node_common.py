@@ -1,0 +1,340 @@
+"""Helpers shared by the bfr nodes (simulator, camera, controller, recorder).
+
+Node plumbing only, no physics or vision: parameters mirrored from the packages' YAML files,
+the executor, QoS profiles of the topic contract, time-stamp conversion, image conversion
+and the standard ``main`` loop with a clean SIGINT/SIGTERM shutdown.
+
+Parameters mirrored from YAML
+-----------------------------
+Each node declares one ROS parameter per leaf of its shipped parameter files, with the
+file's value as the default (nested groups become dotted names: ``ball.mass``,
+``camera.k``). So ``--params-file <file>`` and ``-p name:=value`` override exactly the
+names of the files, a node started without any file runs with the shipped values, and the
+YAML file stays the one source of every value. Parameters accept any type on override
+(``-p ball.mass:=1`` is read as 1.0); :func:`read_parameter_tree` casts back to the type of
+the default.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import sys
+import threading
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import rclpy
+from bfr_model.param_file import load_ros_parameters
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.experimental import EventsExecutor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
+
+__all__ = [
+    "CLOCK_QOS",
+    "COMMAND_QOS",
+    "IMAGE_QOS",
+    "JOINT_STATES_QOS",
+    "STATE_QOS",
+    "StopFlag",
+    "declare_parameter_tree",
+    "finite",
+    "flatten",
+    "image_to_array",
+    "init_ros",
+    "load_yaml_parameters",
+    "make_executor",
+    "ns_to_stamp",
+    "read_parameter_tree",
+    "run_node",
+    "stamp_to_ns",
+    "unflatten",
+]
+
+_NS = 1_000_000_000
+
+
+# -- QoS of the topic contract (README, "Topic contract") -----------------------------------
+#: Images and camera_info: sensor data (best effort, the latest few).
+IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
+                       reliability=ReliabilityPolicy.BEST_EFFORT,
+                       durability=DurabilityPolicy.VOLATILE)
+#: Effort commands (and the simulator's joint_states publisher): reliable.
+COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.VOLATILE)
+#: Project topics (ball_observation, controller_state, sim_truth): reliable, deeper queue.
+STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+#: joint_states subscriptions: best effort, which matches reliable publishers (ros2_control's
+#: joint_state_broadcaster, the simulator) and best-effort ones alike.
+JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                              reliability=ReliabilityPolicy.BEST_EFFORT,
+                              durability=DurabilityPolicy.VOLATILE)
+#: /clock publisher: reliable (rclpy's and rclcpp's time sources subscribe best effort).
+CLOCK_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)
+
+
+# -- parameters mirrored from YAML ---------------------------------------------------------
+def load_yaml_parameters(path: str | Path) -> dict[str, Any]:
+    """The nested ``ros__parameters`` mapping of a ROS 2 parameter file."""
+    return load_ros_parameters(path)
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    """``{"a": {"b": 1}}`` -> ``{"a.b": 1}`` (lists are leaves)."""
+    out: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def unflatten(flat: Mapping[str, Any]) -> dict[str, Any]:
+    """``{"a.b": 1}`` -> ``{"a": {"b": 1}}``."""
+    out: dict[str, Any] = {}
+    for name, value in flat.items():
+        node = out
+        parts = name.split(".")
+        for p in parts[:-1]:
+            node = node.setdefault(p, {})
+        node[parts[-1]] = value
+    return out
+
+
+def declare_parameter_tree(node: Any, defaults: Mapping[str, Any]) -> None:
+    """Declare one dynamically typed parameter per leaf of ``defaults`` (nested mapping).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node.
+    defaults : mapping
+        Nested defaults, e.g. the ``ros__parameters`` of a shipped YAML file.
+    """
+    for name, value in flatten(defaults).items():
+        if node.has_parameter(name):
+            continue
+        node.declare_parameter(name, list(value) if isinstance(value, tuple) else value,
+                               ParameterDescriptor(dynamic_typing=True))
+
+
+def _cast(name: str, value: Any, default: Any) -> Any:
+    """Cast a parameter value to the kind of its default; raise ValueError if impossible."""
+    if isinstance(default, bool):
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.lower() in ("true", "false"):
+            return value.lower() == "true"
+        raise ValueError(f"parameter {name}: expected a boolean, got {value!r}")
+    if isinstance(default, float):
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return float(value)
+        raise ValueError(f"parameter {name}: expected a number, got {value!r}")
+    if isinstance(default, int):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"parameter {name}: expected an integer, got {value!r}")
+        if float(value) != int(value):
+            raise ValueError(f"parameter {name}: expected an integer, got {value!r}")
+        return int(value)
+    if isinstance(default, str):
+        return str(value)
+    if isinstance(default, (list, tuple)):
+        seq = list(value) if isinstance(value, (list, tuple, np.ndarray)) else [value]
+        if default and isinstance(default[0], float):
+            return [float(v) for v in seq]
+        if default and isinstance(default[0], int) and not isinstance(default[0], bool):
+            return [int(v) if float(v) == int(v) else float(v) for v in seq]
+        return seq
+    return value
+
+
+def read_parameter_tree(node: Any, defaults: Mapping[str, Any]) -> dict[str, Any]:
+    """Current values of the parameters declared by :func:`declare_parameter_tree`.
+
+    Returns
+    -------
+    dict
+        Nested mapping like ``defaults``, each value cast to the type of its default.
+
+    Raises
+    ------
+    ValueError
+        If a value cannot be cast (the message names the parameter).
+    """
+    flat = {}
+    for name, default in flatten(defaults).items():
+        value = node.get_parameter(name).value
+        flat[name] = _cast(name, value, default)
+    return unflatten(flat)
+
+
+# -- time ----------------------------------------------------------------------------------
+def stamp_to_ns(stamp: Any) -> int:
+    """``builtin_interfaces/Time`` -> integer nanoseconds."""
+    return int(stamp.sec) * _NS + int(stamp.nanosec)
+
+
+def ns_to_stamp(ns: int, stamp: Any) -> Any:
+    """Fill a ``builtin_interfaces/Time`` from integer nanoseconds (>= 0); returns it."""
+    ns = max(int(ns), 0)
+    stamp.sec = ns // _NS
+    stamp.nanosec = ns % _NS
+    return stamp
+
+
+# -- images --------------------------------------------------------------------------------
+_ENCODINGS = {
+    "mono8": (np.uint8, 1), "8uc1": (np.uint8, 1),
+    "mono16": (np.uint16, 1), "16uc1": (np.uint16, 1),
+    "32fc1": (np.float32, 1),
+    "bgr8": (np.uint8, 3), "rgb8": (np.uint8, 3), "8uc3": (np.uint8, 3),
+    "bgra8": (np.uint8, 4), "rgba8": (np.uint8, 4),
+}
+
+
+def image_to_array(msg: Any) -> tuple[np.ndarray | None, str]:
+    """Convert a ``sensor_msgs/Image`` to an array without copying when possible.
+
+    Supported encodings: mono8, mono16, 8UC1, 16UC1, 32FC1, bgr8, rgb8, bgra8, rgba8
+    (colour images are returned in BGR(A) order, as OpenCV expects).
+
+    Returns
+    -------
+    (ndarray or None, str)
+        The image (H, W) or (H, W, C) and an empty string, or None and the reason it
+        cannot be used (unsupported encoding, inconsistent size or step).
+    """
+    enc = str(msg.encoding).lower()
+    if enc not in _ENCODINGS:
+        return None, (f"unsupported image encoding {msg.encoding!r} (supported: mono8, "
+                      "mono16, 32FC1, bgr8, rgb8, bgra8, rgba8)")
+    dtype, ch = _ENCODINGS[enc]
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    item = np.dtype(dtype).itemsize
+    if h <= 0 or w <= 0:
+        return None, f"empty image ({w}x{h})"
+    if step < w * ch * item:
+        return None, f"image step {step} B is smaller than width {w} x {ch * item} B"
+    data = msg.data
+    if len(data) != step * h:
+        return None, (f"image data has {len(data)} B, expected step {step} x height {h} = "
+                      f"{step * h} B")
+    buf = np.frombuffer(data, dtype=np.uint8).reshape(h, step)[:, : w * ch * item]
+    arr = buf.view(np.dtype(dtype).newbyteorder(">" if msg.is_bigendian else "<"))
+    arr = arr.reshape(h, w, ch) if ch > 1 else arr.reshape(h, w)
+    if item > 1 and bool(msg.is_bigendian) != (sys.byteorder == "big"):
+        arr = arr.astype(arr.dtype.newbyteorder("="))
+    if enc in ("rgb8", "rgba8"):
+        arr = arr[..., [2, 1, 0, 3][:ch]]
+    return arr, ""
+
+
+# -- executor and the main loop ------------------------------------------------------------
+def make_executor(context: Any = None) -> Any:
+    """The events executor of rclpy (Jazzy: ``rclpy.experimental.EventsExecutor``).
+
+    The events executor (a C++ event queue) spends about a third of the CPU time per message
+    of the single-threaded executor (measured here: ~60 us against ~200 us per callback).
+    """
+    return EventsExecutor(context=context)
+
+
+class StopFlag:
+    """Set by SIGINT/SIGTERM (installed by :func:`init_ros`); nodes poll it."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.signal_name = ""
+
+    def __bool__(self) -> bool:
+        return self.event.is_set()
+
+    def handler(self, signum: int, frame: Any) -> None:
+        """Signal handler: remember the signal and set the flag."""
+        self.signal_name = signal.Signals(signum).name
+        self.event.set()
+
+
+def init_ros(argv: list[str] | None) -> StopFlag:
+    """``rclpy.init`` without rclpy's own signal handlers, and ours for SIGINT/SIGTERM.
+
+    rclpy's handlers shut the context down at once, so a node could not publish a last
+    zero torque or close its bag; ours only set a flag that the node's loop polls.
+    """
+    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    stop = StopFlag()
+    signal.signal(signal.SIGINT, stop.handler)
+    signal.signal(signal.SIGTERM, stop.handler)
+    return stop
+
+
+def run_node(node_factory: Callable[[], Any], argv: list[str] | None = None,
+             poll: float = 0.1) -> int:
+    """The standard ``main`` of a bfr node: init, create, spin until SIGINT, shut down.
+
+    The node may define ``run(stop) -> int`` (its own loop, e.g. the simulator) and
+    ``on_shutdown()`` (called before the context goes down: publish a last command, close a
+    bag, print counts).
+
+    Parameters
+    ----------
+    node_factory : callable
+        Creates the node (after ``rclpy.init``); it may raise to refuse to start, with a
+        clear message (printed; exit status 2).
+    argv : list of str, optional
+        Command line (``sys.argv`` when omitted), ROS arguments included.
+    poll : float
+        Longest time between checks of the stop flag [s].
+
+    Returns
+    -------
+    int
+        Exit status.
+    """
+    args = list(sys.argv if argv is None else argv)
+    stop = init_ros(args)
+    status = 0
+    node = None
+    try:
+        try:
+            node = node_factory()
+        except (ValueError, OSError, RuntimeError) as exc:
+            print(f"[FATAL] cannot start: {exc}", file=sys.stderr, flush=True)
+            return 2
+        executor = make_executor()
+        executor.add_node(node)
+        node.executor_ref = executor
+        if hasattr(node, "run"):
+            status = int(node.run(stop) or 0)
+        else:
+            while not stop and rclpy.ok():
+                executor.spin_once(timeout_sec=poll)
+    except KeyboardInterrupt:  # pragma: no cover - a second Ctrl-C
+        pass
+    finally:
+        if node is not None:
+            if stop:
+                node.get_logger().info(f"{stop.signal_name}: shutting down")
+            try:
+                if hasattr(node, "on_shutdown"):
+                    node.on_shutdown()
+            finally:
+                node.destroy_node()
+        if rclpy.ok():
+            rclpy.shutdown()
+    return status
+
+
+def finite(*values: float) -> bool:
+    """True iff every value is a finite float."""
+    return all(isinstance(v, (int, float)) and math.isfinite(v) for v in values)

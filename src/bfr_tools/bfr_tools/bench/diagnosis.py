@@ -1,0 +1,189 @@
+"""``bfr bench`` section ``diagnose``: wall time and peak memory of the diagnosis tools.
+
+A closed-loop recording of ``diagnose_duration`` seconds (60 s by default) is made once with
+``bfr simulate --controller --duration 60 --out rec.mcap`` (a ROS 2 bag of the rigid plant,
+the controller, camera 200 Hz). ``bfr diagnose <bag> --json --no-plots --quiet`` then runs on
+it as a subprocess, each time with an empty ``BFR_CACHE_DIR`` so that the noise-only null is
+calibrated anew (a first diagnosis of a new recording; later runs of the same kind reuse the
+cache). Wall time is measured around the subprocess; the peak resident memory is the
+child's own ``ru_maxrss`` from ``os.wait4`` (it covers the child's waited-for descendants
+too). ``bfr blindtest --cases N --json`` is timed the same way (its default recording
+length, workers and null runs; a small case count keeps the bench short).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+from bfr_tools.bench.common import (
+    BenchOptions,
+    Budget,
+    Figure,
+    FigureSpec,
+    Progress,
+    not_measured,
+)
+
+__all__ = ["SPECS", "run", "run_measured"]
+
+SPECS: list[FigureSpec] = [
+    FigureSpec("diagnose.wall_s", "bfr diagnose, 60 s recording: wall time", "s",
+               Budget("<", 60.0)),
+    FigureSpec("diagnose.peak_mib", "bfr diagnose, 60 s recording: peak memory (RSS)", "MiB",
+               Budget("<", 2048.0)),
+    FigureSpec("diagnose.blindtest_wall_s", "bfr blindtest: wall time", "s"),
+    FigureSpec("diagnose.blindtest_peak_mib", "bfr blindtest: peak memory (RSS)", "MiB"),
+]
+_BY_KEY = {s.key: s for s in SPECS}
+
+
+def run_measured(cmd: list[str], env: dict[str, str], out_path: Path, err_path: Path,
+                 timeout: float) -> tuple[float, float, int]:
+    """Run ``cmd`` to completion; return (wall time [s], peak RSS [MiB], exit status).
+
+    Stdout goes to ``out_path``, stderr to ``err_path``. The peak RSS is the child's
+    ``ru_maxrss`` (KiB on Linux) from ``os.wait4``. On timeout the child gets SIGINT, then
+    SIGKILL; the exit status is then negative.
+    """
+    with out_path.open("wb") as out, err_path.open("wb") as err:
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, env=env, stdin=subprocess.DEVNULL, stdout=out, stderr=err)
+        deadline = t0 + timeout
+        signalled = 0
+        while True:
+            pid, status, usage = os.wait4(proc.pid, os.WNOHANG)
+            if pid == proc.pid:
+                break
+            now = time.perf_counter()
+            if now > deadline and signalled == 0:
+                proc.send_signal(signal.SIGINT)
+                signalled = 1
+                deadline = now + 10.0
+            elif now > deadline and signalled == 1:
+                proc.kill()
+                signalled = 2
+            time.sleep(0.01)
+        wall = time.perf_counter() - t0
+    code = os.waitstatus_to_exitcode(status)
+    proc.returncode = code
+    return wall, usage.ru_maxrss / 1024.0, code if not signalled else -abs(code or 1)
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "bfr_tools.cli", *args]
+
+
+def _tail(path: Path, n: int = 400) -> str:
+    try:
+        return path.read_text(errors="replace")[-n:].strip().replace("\n", " | ")
+    except OSError:
+        return ""
+
+
+def run(opts: BenchOptions, say: Progress) -> list[Figure]:
+    """Measure the ``diagnose`` section (module docstring)."""
+    work = (Path(opts.keep) / "diagnose" if opts.keep
+            else Path(tempfile.mkdtemp(prefix="bfr-bench-")))
+    work.mkdir(parents=True, exist_ok=True)
+    try:
+        return _run(opts, say, work)
+    finally:
+        if not opts.keep:
+            shutil.rmtree(work, ignore_errors=True)
+
+
+def _run(opts: BenchOptions, say: Progress, work: Path) -> list[Figure]:
+    duration = 10.0 if opts.quick else opts.diagnose_duration
+    figs: list[Figure] = []
+    env = dict(os.environ)
+    env.setdefault("PYTHONUNBUFFERED", "1")
+    say(f"diagnose: recording {duration:g} s of closed loop (bfr simulate --controller)")
+    rec = work / "rec.mcap"
+    wall, _, code = run_measured(
+        _cli("simulate", "--controller", "--duration", f"{duration:g}", "--out", str(rec),
+             "--json"), env, work / "simulate.out", work / "simulate.err", 600.0)
+    bag = work / "rec"
+    spec_w, spec_m = _BY_KEY["diagnose.wall_s"], _BY_KEY["diagnose.peak_mib"]
+    if duration != 60.0:  # the budgets are for a 60 s recording
+        spec_w = replace(spec_w, label=f"bfr diagnose, {duration:g} s recording: wall time",
+                         budget=None)
+        spec_m = replace(spec_m, label=f"bfr diagnose, {duration:g} s recording: peak memory",
+                         budget=None)
+    if code != 0 or not bag.exists():
+        reason = f"recording failed (exit {code}): {_tail(work / 'simulate.err')}"
+        figs += [not_measured(spec_w, reason), not_measured(spec_m, reason)]
+    else:
+        walls, mems = [], []
+        verdict = ""
+        failure = ""
+        for rep in range(opts.diagnose_repeats):
+            say(f"diagnose: bfr diagnose on the {duration:g} s recording, cold null cache, "
+                f"run {rep + 1}/{opts.diagnose_repeats}")
+            cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
+            env_d = {**env, "BFR_CACHE_DIR": str(cache)}
+            cmd = _cli("diagnose", str(bag), "--json", "--no-plots", "--quiet")
+            if opts.profile:
+                Path(opts.profile).mkdir(parents=True, exist_ok=True)
+                out = Path(opts.profile).resolve() / f"diagnose-{rep}.prof"
+                cmd = [cmd[0], "-m", "cProfile", "-o", str(out), *cmd[1:]]
+            w, m, c = run_measured(cmd, env_d, work / f"diagnose-{rep}.out",
+                                   work / f"diagnose-{rep}.err", 900.0)
+            if c != 0:
+                failure = f"bfr diagnose exit {c}: {_tail(work / f'diagnose-{rep}.err')}"
+                break
+            walls.append(w)
+            mems.append(m)
+            try:
+                verdict = str(json.loads((work / f"diagnose-{rep}.out").read_text())
+                              .get("verdict", ""))
+            except (OSError, ValueError):
+                verdict = ""
+            say(f"diagnose: {w:.1f} s wall, peak RSS {m:.0f} MiB")
+        if failure:
+            figs += [not_measured(spec_w, failure), not_measured(spec_m, failure)]
+        else:
+            note = (f"{duration:g} s closed-loop bag (made in {wall:.1f} s), "
+                    + ("" if duration == 60.0 else "no budget: the budgets are for 60 s; ")
+                    + "`bfr diagnose <bag> --json --no-plots --quiet`, empty BFR_CACHE_DIR "
+                    f"(null calibrated anew); {len(walls)} run(s); verdict: {verdict}"
+                    + ("; UNDER cProfile (slower than normal)" if opts.profile else ""))
+            figs.append(Figure(spec_w, walls, note=note, extra={"verdict": verdict}))
+            figs.append(Figure(spec_m, mems, note="ru_maxrss of the diagnose process "
+                                                 "(os.wait4)"))
+    cases = 1 if opts.quick else opts.blindtest_cases
+    spec_b, spec_bm = _BY_KEY["diagnose.blindtest_wall_s"], _BY_KEY["diagnose.blindtest_peak_mib"]
+    say(f"diagnose: bfr blindtest --cases {cases} (cold null cache)")
+    cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
+    args = ["blindtest", "--cases", str(cases), "--json"]
+    if opts.quick:
+        args += ["--duration", "5", "--null-runs", "1"]
+    w, m, c = run_measured(_cli(*args), {**env, "BFR_CACHE_DIR": str(cache)},
+                           work / "blindtest.out", work / "blindtest.err", 1800.0)
+    if c not in (0, 1):  # 1: ran, but a target of the blind test was missed
+        reason = f"bfr blindtest exit {c}: {_tail(work / 'blindtest.err')}"
+        figs += [not_measured(spec_b, reason), not_measured(spec_bm, reason)]
+    else:
+        info: dict[str, Any] = {}
+        try:
+            doc = json.loads((work / "blindtest.out").read_text())
+            info = {"score": doc.get("score"), "duration": doc.get("duration")}
+        except (OSError, ValueError):
+            pass
+        say(f"diagnose: blindtest {w:.1f} s wall, peak RSS {m:.0f} MiB")
+        note = (f"`bfr blindtest {' '.join(args[1:])}` (its defaults otherwise: 20 s "
+                f"recordings, 2 workers, 3 null runs); 1 run; exit {c}"
+                if not opts.quick else f"`bfr blindtest {' '.join(args[1:])}`; 1 run; exit {c}")
+        figs.append(Figure(spec_b, [w], note=note, extra=info))
+        figs.append(Figure(spec_bm, [m], note="ru_maxrss of the blindtest process tree "
+                                              "(os.wait4)"))
+    return figs

@@ -1,0 +1,532 @@
+"""``bfr rig``: start the whole emulated rig with one command, record it, summarise the run.
+
+Starts the four nodes as separate processes exactly as ``ros2 run`` would (the executables
+``<prefix>/lib/<pkg>/<exe>`` found through the ament index, ``--ros-args`` for parameters):
+
+1. ``bfr_sim recorder_node`` (unless ``--no-record``): the bag;
+2. ``bfr_camera camera_node`` and ``bfr_control controller_node``;
+3. ``bfr_sim simulator_node``, which waits until the others subscribe, starts the ball on the
+   controller's periodic orbit (``--phase``, ``--d-theta``), runs for ``--duration``
+   simulated seconds and exits.
+
+Every node runs with ``use_sim_time:=true`` (the simulator publishes ``/clock``). In
+``--lockstep`` mode (the default) the simulator waits for the controller's answer to every
+camera frame, so a run is repeatable whatever the machine's load; ``--realtime`` paces it by
+the wall clock like the real rig. Each node's output goes to ``<log-dir>/<node>.log``. When
+the simulator is done, or on Ctrl-C, the nodes are stopped with SIGINT (SIGTERM, then
+SIGKILL after a grace period), recorder last, and the run's summary is printed from the bag
+(:func:`summarize_bag`). A node that dies early stops the run with an error naming it, its
+exit status and the end of its log.
+
+Examples::
+
+    scripts/bfr rig --duration 40
+    scripts/bfr rig --realtime --duration 20 --record /tmp/run1
+    scripts/bfr rig -p simulator:ball.mass:=3.1e-3 -p controller:loop.trigger:=joint_states
+"""
+
+from __future__ import annotations
+
+import argparse
+import fcntl
+import json
+import math
+import os
+import re
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+from bfr_control.constraint import VirtualConstraint
+from bfr_control.controller import load_controller_config
+from bfr_control.orbit import PeriodicOrbit
+from bfr_model.dynamics import RigidModel
+from bfr_model.io.bag import make_typestore, read_bag_messages
+from bfr_model.params import load_params
+
+from bfr_tools.run import executable_path
+
+__all__ = ["NodeSpec", "RigError", "format_summary", "main", "orbit_start", "summarize_bag"]
+
+_NS = 1_000_000_000
+NODES = {  # name -> (package, executable)
+    "recorder": ("bfr_sim", "recorder_node"),
+    "camera": ("bfr_camera", "camera_node"),
+    "controller": ("bfr_control", "controller_node"),
+    "simulator": ("bfr_sim", "simulator_node"),
+}
+
+
+class RigError(RuntimeError):
+    """The rig could not be run; the message says which node and why."""
+
+
+def orbit_start(phase: float = 0.3, d_theta: float = 0.05, rig_params: str | None = None,
+                controller_params: str | None = None) -> dict[str, float]:
+    """The simulator's ``initial.*`` parameters for a ball on the controller's orbit.
+
+    The state on the controller's periodic orbit at contact angle ``phase`` [rad], the frame
+    then turned by ``d_theta`` [rad] (a small error the controller must remove), as the
+    closed-loop harness (:func:`bfr_sim.closed_loop.orbit_initial_state`) starts it.
+
+    Parameters
+    ----------
+    phase : float
+        Contact angle phi at t = 0 [rad].
+    d_theta : float
+        Frame angle offset from the orbit [rad].
+    rig_params, controller_params : str, optional
+        rig.yaml and controller.yaml to use (default: the shipped ones).
+
+    Returns
+    -------
+    dict
+        ``{"initial.theta": ..., "initial.phi": ..., "initial.theta_dot": ...,
+        "initial.phi_dot": ...}`` [rad, rad/s].
+    """
+    params = load_params(rig_params)
+    cfg = load_controller_config(controller_params)
+    model = RigidModel(params)
+    orbit = PeriodicOrbit(model, VirtualConstraint(model, cfg.constraint), cfg.orbit)
+    x = np.asarray(orbit.state(float(phase)), dtype=float)
+    x[0] += float(d_theta)
+    return dict(zip(("initial.theta", "initial.phi", "initial.theta_dot", "initial.phi_dot"),
+                    (float(v) for v in x), strict=True))
+
+
+_DOMAIN_LOCK: IO[str] | None = None
+
+
+def claim_domain_id() -> int:
+    """A ROS domain id that no other bfr process on this machine uses (1..101).
+
+    The claim is an exclusive ``flock`` on ``<tmp>/bfr-ros-domain-<id>.lock``, held for the
+    rest of this process's life: the same scheme as the test suite's (tests/rosutil.py), so a
+    rig and a test run never share a domain.
+    """
+    global _DOMAIN_LOCK  # noqa: PLW0603 - one claim per process
+    start = os.getpid() % 101
+    for k in range(101):
+        domain = 1 + (start + k) % 101
+        handle = (Path(tempfile.gettempdir()) / f"bfr-ros-domain-{domain}.lock").open("a")
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            handle.close()
+            continue
+        _DOMAIN_LOCK = handle
+        return domain
+    raise RigError("no free ROS_DOMAIN_ID in 1..101 on this machine")
+
+
+# -- processes ---------------------------------------------------------------------------------
+@dataclass
+class NodeSpec:
+    """One node process of the rig."""
+
+    name: str
+    package: str
+    executable: str
+    ros_args: list[str] = field(default_factory=list)
+    process: subprocess.Popen | None = None
+    log_path: Path | None = None
+    log: IO[bytes] | None = None
+
+    def command(self) -> list[str]:
+        """Command line: the ament executable and its ``--ros-args``."""
+        exe = executable_path(self.package, self.executable)
+        return [str(exe), "--ros-args", "-r", f"__node:={self.name}", *self.ros_args]
+
+    def start(self, log_dir: Path, env: dict[str, str]) -> None:
+        """Start the process with stdout and stderr into ``<log_dir>/<name>.log``."""
+        self.log_path = log_dir / f"{self.name}.log"
+        self.log = self.log_path.open("wb")
+        self.process = subprocess.Popen(self.command(), env=env, stdin=subprocess.DEVNULL,
+                                        stdout=self.log, stderr=subprocess.STDOUT)
+
+    @property
+    def returncode(self) -> int | None:
+        """Exit status, or None while running."""
+        return None if self.process is None else self.process.poll()
+
+    def tail(self, lines: int = 25) -> str:
+        """The last lines of the node's log."""
+        if self.log_path is None or not self.log_path.exists():
+            return "(no log)"
+        if self.log is not None:
+            self.log.flush()
+        text = self.log_path.read_text(errors="replace").splitlines()
+        return "\n".join(text[-lines:])
+
+    def stop(self, grace: float = 10.0) -> int | None:
+        """SIGINT to the process, then SIGTERM and SIGKILL after ``grace`` seconds each."""
+        p = self.process
+        if p is None:
+            return None
+        for sig, wait in ((signal.SIGINT, grace), (signal.SIGTERM, 5.0), (signal.SIGKILL, 5.0)):
+            if p.poll() is not None:
+                break
+            p.send_signal(sig)
+            try:
+                p.wait(timeout=wait)
+            except subprocess.TimeoutExpired:
+                continue
+        if self.log is not None:
+            self.log.close()
+            self.log = None
+        return p.poll()
+
+
+def _describe_exit(code: int) -> str:
+    if code < 0:
+        try:
+            return f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            return f"killed by signal {-code}"
+    return f"exit status {code}"
+
+
+def _wall_stats(log_path: Path | None) -> tuple[float, float] | None:
+    """(wall seconds, real-time factor) from the simulator's last log line, if present."""
+    if log_path is None or not log_path.exists():
+        return None
+    found = re.findall(r"after ([0-9.]+) s wall \(real-time factor ([0-9.]+)\)",
+                       log_path.read_text(errors="replace"))
+    return (float(found[-1][0]), float(found[-1][1])) if found else None
+
+
+# -- the bag's summary -------------------------------------------------------------------------
+def summarize_bag(path: str | Path) -> dict[str, Any]:
+    """What happened in a rig run, from its bag (simulated time throughout).
+
+    Returns
+    -------
+    dict
+        ``topics`` (per topic: ``count``, ``rate`` [Hz] over its own span of stamps), the
+        run's ``duration`` [s], ``rolling_from`` (first ROLLING step) and ``rolling_until``
+        [s] (first time after it that the true phi_dot <= 0 or the controller left
+        ROLLING; the end if never), ``rolling_time`` [s], ``kept_rolling``,
+        ``mean_phi_dot`` [rad/s] (true contact-angle rate over the rolling time, else the
+        controller's estimate), ``loop_rate`` [Hz] (control steps), ``camera_rate`` [Hz]
+        (ball observations), ``camera_valid_fraction``, ``camera_processing_ms`` (median),
+        ``modes`` (steps per mode), ``final_mode``, ``rms_y`` [rad] and ``rms_z`` [rad/s]
+        over the last half of the rolling time, ``max_abs_torque`` [N m].
+    """
+    contents = read_bag_messages(path)
+    store = make_typestore()
+    by_topic: dict[str, list[Any]] = {}
+    for m in contents.messages:
+        by_topic.setdefault(m.topic.lstrip("/"), []).append(m)
+    names = {0: "WAITING", 1: "ROLLING", 2: "BALL_LOST", 3: "FAULT"}
+
+    def decode(topic: str) -> list[Any]:
+        return [store.deserialize_cdr(m.data, m.msgtype) for m in by_topic.get(topic, [])]
+
+    def stamps(msgs: list[Any]) -> np.ndarray:
+        return np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in msgs])
+
+    def rate(t: np.ndarray) -> float:
+        return float((t.size - 1) / (t[-1] - t[0])) if t.size > 1 and t[-1] > t[0] else 0.0
+
+    topics: dict[str, dict[str, Any]] = {}
+    for topic, msgs in sorted(by_topic.items()):
+        t = np.sort(np.array([m.log_time for m in msgs], dtype=float)) / _NS
+        topics["/" + topic] = {"count": len(msgs), "rate": rate(t), "type": msgs[0].msgtype}
+    truth = decode("sim_truth")
+    states = decode("controller_state")
+    obs = decode("ball_observation")
+    out: dict[str, Any] = {"bag": str(path), "complete": contents.complete, "topics": topics,
+                           "warnings": contents.warnings}
+    js = by_topic.get("joint_states", [])
+    js_t = np.array([m.log_time for m in js], dtype=float) / _NS
+    t_all = [a for a in (js_t, stamps(truth), stamps(states)) if a.size]
+    t0 = min(float(a.min()) for a in t_all) if t_all else math.nan
+    t1 = max(float(a.max()) for a in t_all) if t_all else math.nan
+    out["duration"] = t1 - t0
+    ts = stamps(states)
+    mode = np.array([s.mode for s in states], dtype=int)
+    out["modes"] = {names.get(k, str(k)): int(np.sum(mode == k)) for k in np.unique(mode)}
+    out["final_mode"] = names.get(int(mode[-1]), "?") if mode.size else None
+    out["loop_rate"] = rate(ts)
+    rolling = np.nonzero(mode == 1)[0]
+    out["rolling_from"] = float(ts[rolling[0]]) if rolling.size else None
+    until = t1
+    if rolling.size:
+        start = ts[rolling[0]]
+        left = np.nonzero((ts > start) & (mode != 1))[0]
+        if left.size:
+            until = float(ts[left[0]])
+        if truth:
+            tt = stamps(truth)
+            stopped = np.nonzero((tt > start) & (np.array([s.phi_dot for s in truth]) <= 0))[0]
+            if stopped.size:
+                until = min(until, float(tt[stopped[0]]))
+        out["rolling_until"] = until
+        out["rolling_time"] = until - float(start)
+        out["kept_rolling"] = bool(until >= t1 - 1e-6 and mode[-1] == 1)
+        sel = (ts >= start) & (ts <= until)
+        half = sel & (ts >= start + 0.5 * (until - start))
+        y = np.array([s.y for s in states])
+        z = np.array([s.z for s in states])
+        out["rms_y"] = float(np.sqrt(np.nanmean(y[half] ** 2))) if half.any() else math.nan
+        out["rms_z"] = float(np.sqrt(np.nanmean(z[half] ** 2))) if half.any() else math.nan
+        if truth:
+            tt = stamps(truth)
+            ph = np.array([s.phi for s in truth])
+            w = (tt >= start) & (tt <= until)
+            out["mean_phi_dot"] = (float((ph[w][-1] - ph[w][0]) / (tt[w][-1] - tt[w][0]))
+                                   if np.count_nonzero(w) > 1 else math.nan)
+            out["mean_phi_dot_source"] = "sim_truth"
+        else:
+            pd = np.array([s.phi_dot for s in states])
+            out["mean_phi_dot"] = float(np.nanmean(pd[sel])) if sel.any() else math.nan
+            out["mean_phi_dot_source"] = "controller estimate"
+    else:
+        out.update(rolling_until=None, rolling_time=0.0, kept_rolling=False,
+                   mean_phi_dot=math.nan, rms_y=math.nan, rms_z=math.nan)
+    torque = np.array([s.torque for s in states]) if states else np.zeros(0)
+    out["max_abs_torque"] = float(np.max(np.abs(torque))) if torque.size else 0.0
+    ot = stamps(obs)
+    out["camera_rate"] = rate(ot)
+    out["camera_frames"] = len(obs)
+    out["camera_valid_fraction"] = (float(np.mean([o.valid for o in obs])) if obs else 0.0)
+    out["camera_processing_ms"] = (float(np.median([o.processing_time for o in obs])) * 1e3
+                                   if obs else math.nan)
+    if truth and obs:  # camera accuracy against the truth at the same exposure stamps
+        tt = stamps(truth)
+        idx = np.searchsorted(tt, ot)
+        ok = (idx < tt.size) & np.array([o.valid for o in obs])
+        ok[ok] &= np.abs(tt[idx[ok]] - ot[ok]) < 1e-6
+        if ok.any():
+            err = [math.hypot(obs[i].x - truth[idx[i]].ball_x, obs[i].y - truth[idx[i]].ball_y)
+                   for i in np.nonzero(ok)[0]]
+            out["camera_error_mm_median"] = 1e3 * float(np.median(err))
+    return out
+
+
+def format_summary(s: dict[str, Any], wall: tuple[float, float] | None = None) -> str:
+    """Human-readable summary of :func:`summarize_bag` (plus the simulator's wall time)."""
+    lines = [f"bag: {s['bag']} ({'complete' if s['complete'] else 'INCOMPLETE'})"]
+    dur = s["duration"]
+    if s.get("rolling_from") is None:
+        verdict = "the controller never started rolling control"
+    elif s["kept_rolling"]:
+        verdict = (f"the ball kept rolling for {s['rolling_time']:.1f} s (from t = "
+                   f"{s['rolling_from']:.2f} s to the end)")
+    else:
+        verdict = (f"the ball rolled for {s['rolling_time']:.1f} s (t = {s['rolling_from']:.2f}"
+                   f" to {s['rolling_until']:.2f} s), then was lost; final mode "
+                   f"{s['final_mode']}")
+    lines.append(f"run: {dur:.2f} s simulated; {verdict}")
+    src = s.get("mean_phi_dot_source", "")
+    lines.append(f"mean phi_dot: {s['mean_phi_dot']:.3f} rad/s ({src})"
+                 f"; RMS over the last half of the rolling time: y {s['rms_y']:.2e} rad, "
+                 f"z {s['rms_z']:.2e} rad/s; max |torque| {s['max_abs_torque']:.3f} N m")
+    rtf = wall[1] if wall is not None else None
+
+    def wall_rate(rate: float) -> str:
+        return f" = {rate * rtf:.0f} Hz of wall time" if rtf else ""
+
+    lines.append(f"control loop: {s['loop_rate']:.1f} Hz in simulated time"
+                 f"{wall_rate(s['loop_rate'])}; modes "
+                 + ", ".join(f"{k} {v}" for k, v in s["modes"].items()))
+    cam = (f"camera: {s['camera_rate']:.1f} Hz{wall_rate(s['camera_rate'])}, "
+           f"{100 * s['camera_valid_fraction']:.1f} % valid, median processing "
+           f"{s['camera_processing_ms']:.2f} ms")
+    if "camera_error_mm_median" in s:
+        cam += f", median error vs truth {s['camera_error_mm_median']:.3f} mm"
+    lines.append(cam)
+    if wall is not None:
+        lines.append(f"simulator: {dur:.1f} s simulated in {wall[0]:.1f} s of wall time "
+                     f"(real-time factor {wall[1]:.2f})")
+    lines.append("topics (count, rate in simulated time):")
+    for topic, d in s["topics"].items():
+        lines.append(f"  {topic:<30} {d['count']:>7}  {d['rate']:8.1f} Hz  {d['type']}")
+    return "\n".join(lines)
+
+
+# -- the command ---------------------------------------------------------------------------
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="bfr rig", description="Run the emulated rig (simulator, camera, controller and "
+        "recorder nodes as processes, like ros2 run) and summarise the run from its bag.")
+    mode = p.add_mutually_exclusive_group()
+    mode.add_argument("--lockstep", dest="mode", action="store_const", const="lockstep",
+                      help="the simulator waits for the controller's answer to each camera "
+                           "frame: repeatable whatever the load (default)")
+    mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
+                      help="pace the simulation by the wall clock, like the real rig")
+    p.set_defaults(mode="lockstep")
+    p.add_argument("--duration", type=float, default=40.0,
+                   help="simulated seconds [s] (default 40)")
+    p.add_argument("--record", type=Path, default=None,
+                   help="bag directory to write (default: <log-dir>/bag)")
+    p.add_argument("--no-record", action="store_true", help="run without the recorder")
+    p.add_argument("--phase", type=float, default=0.3,
+                   help="contact angle on the orbit at t = 0 [rad]")
+    p.add_argument("--d-theta", type=float, default=0.05,
+                   help="frame angle offset from the orbit at t = 0 [rad]")
+    p.add_argument("--rig-params", default=None,
+                   help="rig.yaml for the simulator (and the controller's model, the camera's "
+                        "ball radius)")
+    p.add_argument("--camera-params", default=None, help="camera.yaml (simulator and camera)")
+    p.add_argument("--controller-params", default=None, help="controller.yaml")
+    p.add_argument("-p", "--param", action="append", default=[], metavar="NODE:NAME:=VALUE",
+                   help="a parameter of one node (simulator, camera, controller, recorder), "
+                        "e.g. simulator:ball.mass:=3.1e-3; repeatable")
+    p.add_argument("--log-dir", type=Path, default=None,
+                   help="folder for the node logs (default: log/rig/<date>_<time>)")
+    p.add_argument("--wall-timeout", type=float, default=None,
+                   help="give up after this many wall seconds (default: generous)")
+    p.add_argument("--domain", default=None, metavar="auto|ID",
+                   help="ROS_DOMAIN_ID for the nodes: a number, or 'auto' for a free one with "
+                        "localhost-only discovery (default: the environment's)")
+    p.add_argument("--json", action="store_true", help="print the summary as JSON")
+    return p
+
+
+def _node_args(args: argparse.Namespace, log_dir: Path, bag: Path | None,
+               start: dict[str, float]) -> dict[str, list[str]]:
+    # the simulator is the clock (it publishes /clock); every other node follows it
+    per: dict[str, list[str]] = {n: ["-p", "use_sim_time:=true"] for n in NODES
+                                 if n != "simulator"}
+    per["simulator"] = []
+    for n in ("simulator", "camera", "controller"):
+        if args.rig_params:
+            per[n] += ["--params-file", str(args.rig_params)]
+    for n in ("simulator", "camera"):
+        if args.camera_params:
+            per[n] += ["--params-file", str(args.camera_params)]
+    if args.controller_params:
+        per["controller"] += ["--params-file", str(args.controller_params)]
+    subscribers = 2 + (bag is not None)  # camera, controller, recorder on joint_states
+    per["simulator"] += ["-p", f"sim.mode:={args.mode}", "-p", f"sim.duration:={args.duration}",
+                         "-p", f"start.wait_subscribers:={subscribers}"]
+    per["simulator"] += [a for k, v in start.items() for a in ("-p", f"{k}:={v!r}")]
+    per["controller"] += ["-p", "loop.trigger:=observation"]
+    # wall-clock watchdogs: in lock-step a gap only means a slow machine, and this command
+    # watches the processes itself (it stops the others as soon as the simulator is done)
+    per["controller"] += ["-p", "safety.watchdog_timeout:=5.0"]
+    per["camera"] += ["-p", "input.frame_timeout:=5.0"]
+    if bag is not None:
+        per["recorder"] += ["-p", f"recorder.path:={bag}"]
+    for item in args.param:
+        node, sep, assignment = item.partition(":")
+        if not sep or node not in NODES or ":=" not in assignment:
+            raise RigError(f"-p {item!r}: expected NODE:NAME:=VALUE with NODE one of "
+                           f"{', '.join(NODES)}")
+        per[node] += ["-p", assignment]
+    return per
+
+
+def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path | None,
+                                               tuple[float, float] | None]:
+    """Run the rig (see the module docstring); returns (summary, log dir, bag, wall stats)."""
+    stamp = datetime.now().strftime("%Y%m%d_%H%M%S")
+    log_dir = args.log_dir or Path("log") / "rig" / stamp
+    log_dir.mkdir(parents=True, exist_ok=True)
+    bag = None if args.no_record else (args.record or log_dir / "bag")
+    if bag is not None and bag.exists():
+        raise RigError(f"{bag} exists already: choose a new --record directory")
+    start = orbit_start(args.phase, args.d_theta, args.rig_params, args.controller_params)
+    per = _node_args(args, log_dir, bag, start)
+    env = dict(os.environ)
+    env.update(PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
+    if args.domain == "auto":
+        env.update(ROS_DOMAIN_ID=str(claim_domain_id()), ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST")
+        env.pop("ROS_STATIC_PEERS", None)
+    elif args.domain is not None:
+        if not args.domain.isdigit():
+            raise RigError(f"--domain {args.domain!r}: expected 'auto' or a number")
+        env["ROS_DOMAIN_ID"] = args.domain
+    order = [n for n in ("recorder", "camera", "controller", "simulator")
+             if n != "recorder" or bag is not None]
+    nodes = {n: NodeSpec(n, *NODES[n], per[n]) for n in order}
+    wall_limit = args.wall_timeout or (
+        120.0 + (args.duration * 10.0 if args.mode == "lockstep" else args.duration * 2.0))
+    print(f"bfr rig: {args.mode}, {args.duration:g} s simulated, ROS_DOMAIN_ID "
+          f"{env.get('ROS_DOMAIN_ID', '0')}; logs in {log_dir}"
+          + (f"; bag {bag}" if bag else ""), flush=True)
+    print("bfr rig: initial state on the orbit: "
+          + ", ".join(f"{k.split('.')[1]} {v:+.4f}" for k, v in start.items()), flush=True)
+    t_start = time.monotonic()
+    failure: str | None = None
+    interrupted = False
+    try:
+        for n in order:
+            nodes[n].start(log_dir, env)
+            print(f"bfr rig: started {n} ({nodes[n].package}/{nodes[n].executable}, pid "
+                  f"{nodes[n].process.pid})", flush=True)  # type: ignore[union-attr]
+        sim = nodes["simulator"]
+        while True:
+            time.sleep(0.2)
+            rc = sim.returncode
+            if rc is not None:
+                if rc != 0:
+                    failure = (f"simulator ended early ({_describe_exit(rc)}); its log "
+                               f"({sim.log_path}) ends with:\n{sim.tail()}")
+                break
+            dead = [n for n in order if n != "simulator" and nodes[n].returncode is not None]
+            if dead:
+                n = dead[0]
+                failure = (f"{n} node died ({_describe_exit(nodes[n].returncode or 0)}); its "
+                           f"log ({nodes[n].log_path}) ends with:\n{nodes[n].tail()}")
+                break
+            if time.monotonic() - t_start > wall_limit:
+                failure = (f"the run did not finish within {wall_limit:.0f} s of wall time; the "
+                           f"simulator's log ends with:\n{sim.tail()}")
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+        print("bfr rig: interrupted; stopping the nodes", flush=True)
+    finally:
+        for n in ("simulator", "controller", "camera", "recorder"):
+            if n in nodes:
+                nodes[n].stop()
+    wall = _wall_stats(nodes["simulator"].log_path)
+    if failure is not None:
+        raise RigError(failure)
+    summary = None
+    if bag is not None and (bag / "metadata.yaml").exists():
+        summary = summarize_bag(bag)
+        summary["mode"] = args.mode
+        summary["interrupted"] = interrupted
+        if wall is not None:
+            summary["wall_time"], summary["real_time_factor"] = wall
+    return summary, log_dir, bag, wall
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``bfr rig`` (module docstring)."""
+    args = _parser().parse_args(list(sys.argv[1:] if argv is None else argv))
+    if not (math.isfinite(args.duration) and args.duration > 0):
+        print("bfr rig: error: --duration must be > 0", file=sys.stderr)
+        return 2
+    try:
+        summary, log_dir, _, wall = run_rig(args)
+    except RigError as exc:
+        print(f"bfr rig: error: {exc}", file=sys.stderr)
+        return 1
+    except (ValueError, LookupError, OSError) as exc:
+        print(f"bfr rig: error: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    if summary is None:
+        print(f"bfr rig: done (no bag recorded); logs in {log_dir}")
+        return 0
+    if args.json:
+        print(json.dumps(summary, default=float))
+    else:
+        print(format_summary(summary, wall))
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,102 @@
+"""Launch the bfr rig on a real ROS 2 Jazzy install (``ros2 launch bfr_control rig.launch.py``).
+
+Emulated rig (default): simulator, camera, controller and, with ``record:=<dir>``, the
+recorder; every node but the simulator follows its ``/clock``. The ball starts on the
+controller's orbit at contact angle ``phase`` with the frame ``d_theta`` off it.
+
+    ros2 launch bfr_control rig.launch.py mode:=realtime record:=/tmp/run1
+
+Real rig (``hardware:=true``): only the camera and controller nodes, against the drivers'
+topics (docs/hardware.md): ``image_topic``/``camera_info_topic`` of the camera driver,
+ros2_control's ``/joint_states`` and ``/effort_controller/commands``.
+
+    ros2 launch bfr_control rig.launch.py hardware:=true camera_params:=my_camera.yaml \
+        image_topic:=/cam/image_raw camera_info_topic:=/cam/camera_info
+
+Here, where ``ros2 launch`` is not available, ``scripts/bfr rig`` starts the same nodes.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from bfr_model.param_file import config_path
+from bfr_tools.rig import orbit_start
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def _config(package: str, name: str) -> str:
+    return str(config_path(package, name))
+
+
+def _nodes(context: Any) -> list[Any]:
+    def arg(name: str) -> str:
+        return LaunchConfiguration(name).perform(context)
+
+    hardware = arg("hardware").lower() in ("true", "1", "yes")
+    record = arg("record")
+    rig = _config("bfr_model", "rig.yaml")
+    camera = arg("camera_params") or _config("bfr_camera", "camera.yaml")
+    camera_node = _config("bfr_camera", "camera_node.yaml")
+    controller = _config("bfr_control", "controller.yaml")
+    controller_node = _config("bfr_control", "controller_node.yaml")
+    nodes = []
+    if hardware:
+        hw = _config("bfr_control", "hardware.yaml")
+        nodes.append(Node(
+            package="bfr_camera", executable="camera_node", name="camera", output="screen",
+            parameters=[camera, rig, camera_node, hw],
+            remappings=[("camera/image_raw", arg("image_topic")),
+                        ("camera/camera_info", arg("camera_info_topic"))]))
+        nodes.append(Node(
+            package="bfr_control", executable="controller_node", name="controller",
+            output="screen", parameters=[rig, controller, controller_node, hw]))
+        sim_time = {"use_sim_time": False}
+    else:
+        start = orbit_start(float(arg("phase")), float(arg("d_theta")))
+        subscribers = 3 if record else 2
+        nodes.append(Node(
+            package="bfr_sim", executable="simulator_node", name="simulator", output="screen",
+            parameters=[rig, camera, _config("bfr_sim", "simulator_node.yaml"),
+                        {"sim.mode": arg("mode"), "start.wait_subscribers": subscribers,
+                         **start}]))
+        sim_time = {"use_sim_time": True}
+        nodes.append(Node(
+            package="bfr_camera", executable="camera_node", name="camera", output="screen",
+            parameters=[camera, rig, camera_node, sim_time]))
+        nodes.append(Node(
+            package="bfr_control", executable="controller_node", name="controller",
+            output="screen", parameters=[rig, controller, controller_node, sim_time]))
+    if record:
+        nodes.append(Node(
+            package="bfr_sim", executable="recorder_node", name="recorder", output="screen",
+            parameters=[_config("bfr_sim", "recorder_node.yaml"),
+                        {"recorder.path": record, **sim_time}]))
+    return nodes
+
+
+def generate_launch_description() -> LaunchDescription:
+    """The launch description (arguments: see the module docstring and ``--show-args``)."""
+    return LaunchDescription([
+        DeclareLaunchArgument("mode", default_value="realtime",
+                              description="simulator: realtime or lockstep"),
+        DeclareLaunchArgument("hardware", default_value="false",
+                              description="true: camera and controller only, real drivers"),
+        DeclareLaunchArgument("record", default_value="",
+                              description="bag directory to record into ('' = no recorder)"),
+        DeclareLaunchArgument("phase", default_value="0.3",
+                              description="contact angle on the orbit at t = 0 [rad]"),
+        DeclareLaunchArgument("d_theta", default_value="0.05",
+                              description="frame angle offset from the orbit at t = 0 [rad]"),
+        DeclareLaunchArgument("camera_params", default_value="",
+                              description="camera.yaml with the calibration and pose "
+                                          "('' = the shipped one)"),
+        DeclareLaunchArgument("image_topic", default_value="/camera/image_raw",
+                              description="hardware: the camera driver's image topic"),
+        DeclareLaunchArgument("camera_info_topic", default_value="/camera/camera_info",
+                              description="hardware: the camera driver's camera_info topic"),
+        OpaqueFunction(function=_nodes),
+    ])
