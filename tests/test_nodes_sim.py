@@ -167,7 +167,7 @@ def test_simulator_params_file_remap_and_realtime(ros_harness: rosutil.RosHarnes
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["-p", "sim.mode:=bogus"], "sim.mode must be 'realtime' or 'lockstep'"),
+    (["-p", "sim.mode:=bogus"], "parameter sim.mode: must be one of realtime, lockstep"),
     (["-p", "ball.plate_distance:=1.0"], "ball.plate_distance"),
     (["-p", "ball.mass:=heavy"], "parameter ball.mass: expected a number"),
 ])

@@ -82,5 +82,5 @@ def test_rig_names_a_node_that_dies_early(tmp_path: Path,
     err = capsys.readouterr().err
     assert status == 1
     assert "camera node died (exit status 2)" in err
-    assert "ball.radius must be > 0 m, got -1.0" in err  # the end of its log
+    assert "ball.radius: must be > 0 m, got -1.0" in err  # the end of its log
     assert (tmp_path / "logs" / "camera.log").exists()

@@ -48,7 +48,14 @@ from typing import Any
 import cv2
 import numpy as np
 import yaml
-from bfr_model.param_file import config_path, load_ros_parameters
+from bfr_model.param_file import (
+    ParameterError,
+    check,
+    config_path,
+    finite,
+    load_ros_parameters,
+    positive,
+)
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = [
@@ -79,8 +86,12 @@ DISTORTION_MODELS: dict[str, tuple[int, ...]] = {
 _UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-14)
 
 
-class CameraModelError(ValueError):
-    """A camera model, calibration file or parameter is invalid; the message says which."""
+class CameraModelError(ParameterError):
+    """A camera model, calibration file or parameter is invalid; the message says which.
+
+    A :class:`bfr_model.param_file.ParameterError` (so a ``ValueError``): a failed check of a
+    field is re-raised as this type.
+    """
 
 
 # --------------------------------------------------------------------------------------------
@@ -169,15 +180,30 @@ def look_at(eye: ArrayLike, target: ArrayLike = (0.0, 0.0, 0.0),
 # The camera model
 # --------------------------------------------------------------------------------------------
 def _finite_seq(name: str, values: Any, length: int | None = None) -> tuple[float, ...]:
+    """``values`` as a tuple of finite floats (``length`` of them when given).
+
+    Raises
+    ------
+    ParameterError
+        Naming ``camera.<name>``, if a value is not a finite number or the count is wrong.
+    """
     try:
-        t = tuple(float(v) for v in np.asarray(values, dtype=float).reshape(-1))
-    except (TypeError, ValueError) as exc:
-        raise CameraModelError(f"camera.{name}: expected numbers, got {values!r}") from exc
-    if length is not None and len(t) != length:
-        raise CameraModelError(f"camera.{name}: expected {length} numbers, got {len(t)}")
-    if not all(math.isfinite(v) for v in t):
-        raise CameraModelError(f"camera.{name}: values must be finite, got {t}")
+        t, numeric = tuple(float(v) for v in np.asarray(values, dtype=float).reshape(-1)), True
+    except (TypeError, ValueError):
+        t, numeric = (), False
+    check(numeric, f"camera.{name}", f"expected numbers, got {values!r}")
+    check(length is None or len(t) == length, f"camera.{name}",
+          f"expected {length} numbers, got {len(t)}")
+    check(all(math.isfinite(v) for v in t), f"camera.{name}", f"values must be finite, got {t}")
     return t
+
+
+def _positive_int(name: str, value: Any) -> int:
+    """``value`` as an int if it is a positive integer (``640.0`` counts, a bool does not)."""
+    ok = (isinstance(value, (int, np.integer, float)) and not isinstance(value, bool)
+          and float(value).is_integer() and value > 0)
+    check(ok, f"camera.{name}", f"expected a positive integer, got {value!r}")
+    return int(value)
 
 
 @dataclass(frozen=True)
@@ -219,51 +245,46 @@ class CameraModel:
     frame_id: str = "camera_optical_frame"
 
     def __post_init__(self) -> None:
+        try:
+            self._validate()
+        except CameraModelError:
+            raise
+        except ParameterError as exc:  # a failed check: the camera's own error type
+            raise CameraModelError(str(exc)) from exc
+
+    def _validate(self) -> None:
+        """Check every field with the checks of :mod:`bfr_model.param_file`; normalise types.
+
+        Sizes become ints, sequences tuples of floats, the quaternion is normalised.
+        """
         set_ = object.__setattr__
         for name in ("width", "height"):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v <= 0:
-                if isinstance(v, float) and v.is_integer() and v > 0:
-                    set_(self, name, int(v))
-                    continue
-                raise CameraModelError(f"camera.{name}: expected a positive integer, got {v!r}")
-            set_(self, name, int(v))
+            set_(self, name, _positive_int(name, getattr(self, name)))
         k = _finite_seq("k", self.k, 9)
-        if k[0] <= 0 or k[4] <= 0 or k[3] != 0 or k[6] != 0 or k[7] != 0 or k[8] != 1:
-            raise CameraModelError(
-                f"camera.k: expected [fx, s, cx, 0, fy, cy, 0, 0, 1] with fx, fy > 0, got {k}")
+        check(k[0] > 0 and k[4] > 0 and k[3] == 0 and k[6] == 0 and k[7] == 0 and k[8] == 1,
+              "camera.k", f"expected [fx, s, cx, 0, fy, cy, 0, 0, 1] with fx, fy > 0, got {k}")
         set_(self, "k", k)
         d = _finite_seq("d", self.d)
         model = str(self.distortion_model)
-        if model not in DISTORTION_MODELS:
-            raise CameraModelError(
-                f"camera.distortion_model: {model!r} is not supported "
-                f"(use one of {sorted(DISTORTION_MODELS)})")
-        if len(d) not in DISTORTION_MODELS[model]:
-            raise CameraModelError(
-                f"camera.d: {model} takes {DISTORTION_MODELS[model]} coefficients, got {len(d)}")
+        check(model in DISTORTION_MODELS, "camera.distortion_model",
+              f"{model!r} is not supported (use one of {sorted(DISTORTION_MODELS)})")
+        check(len(d) in DISTORTION_MODELS[model], "camera.d",
+              f"{model} takes {DISTORTION_MODELS[model]} coefficients, got {len(d)}")
         set_(self, "d", d)
         set_(self, "position", _finite_seq("position", self.position, 3))
         q = _finite_seq("orientation", self.orientation, 4)
         n = math.sqrt(sum(v * v for v in q))
-        if abs(n - 1.0) > 1e-3:
-            raise CameraModelError(
-                f"camera.orientation: quaternion (x, y, z, w) must have unit norm, got |q| = {n}")
+        check(abs(n - 1.0) <= 1e-3, "camera.orientation",
+              f"quaternion (x, y, z, w) must have unit norm, got |q| = {n}")
         set_(self, "orientation", tuple(v / n for v in q))
-        for name in ("exposure_time", "frame_rate"):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise CameraModelError(f"camera.{name}: expected a finite number, got {v!r}")
-            set_(self, name, float(v))
-        if self.frame_rate <= 0:
-            raise CameraModelError(f"camera.frame_rate: must be > 0, got {self.frame_rate}")
-        if not 0.0 <= self.exposure_time <= 1.0 / self.frame_rate:
-            raise CameraModelError(
-                f"camera.exposure_time: must be in [0, 1/frame_rate = {1 / self.frame_rate} s],"
-                f" got {self.exposure_time}")
-        if self.camera_from_world(np.zeros((1, 3)))[0, 2] <= 0:
-            raise CameraModelError(
-                "camera pose: the world origin (the frame's axis) is behind the camera")
+        finite("camera.exposure_time", self.exposure_time)
+        positive("camera.frame_rate", self.frame_rate)
+        set_(self, "exposure_time", float(self.exposure_time))
+        set_(self, "frame_rate", float(self.frame_rate))
+        check(0.0 <= self.exposure_time <= 1.0 / self.frame_rate, "camera.exposure_time",
+              f"must be in [0, 1/frame_rate = {1 / self.frame_rate} s], got {self.exposure_time}")
+        check(self.camera_from_world(np.zeros((1, 3)))[0, 2] > 0, "camera.position/orientation",
+              "the world origin (the frame's axis) is behind the camera")
 
     # -- derived arrays (read-only, cached) ------------------------------------------------
     @staticmethod

@@ -28,7 +28,7 @@ import time
 from collections import deque
 from typing import Any
 
-from bfr_model.param_file import config_path
+from bfr_model.param_file import check, config_path
 from bfr_model.params import default_params_path
 from bfr_ros.node_common import (
     IMAGE_QOS,
@@ -129,11 +129,9 @@ class CameraNode(Node):
         self.camera: CameraModel = camera_from_dict(self.camera_params)
         self.detector_config = detector_config_from_dict(p["detector"])
         self.ball_radius = float(p["ball"]["radius"])
-        if not (math.isfinite(self.ball_radius) and self.ball_radius > 0):
-            what = "is unknown" if self.ball_radius == 0 else \
-                f"must be > 0 m, got {self.ball_radius}"
-            raise ValueError(f"ball.radius {what}: pass --params-file "
-                             "<bfr_model>/config/rig.yaml or -p ball.radius:=<m>")
+        what = "is unknown" if self.ball_radius == 0 else f"must be > 0 m, got {self.ball_radius}"
+        check(math.isfinite(self.ball_radius) and self.ball_radius > 0, "ball.radius",
+              f"{what}: pass --params-file <bfr_model>/config/rig.yaml or -p ball.radius:=<m>")
         self.detector = BallDetector(self.camera, self.ball_radius, self.detector_config)
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])

@@ -70,6 +70,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from bfr_model.param_file import finite, integer, nonnegative, one_of, positive
 from numpy.typing import ArrayLike, NDArray
 
 from bfr_camera.calibration import CameraModel, CameraModelError, read_ros_parameters
@@ -248,26 +249,19 @@ class DetectorConfig:
     ball_plane_z: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.polarity not in ("bright", "dark"):
-            raise ValueError(f"detector.polarity must be 'bright' or 'dark', got "
-                             f"{self.polarity!r}")
-        positive = ("roi_radius_factor", "candidate_threshold", "min_cnr", "max_rms_px",
-                    "radius_tolerance", "radius_prior_sigma", "min_arc")
-        for name in positive:
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"detector.{name} must be > 0, got {v!r}")
+        one_of("detector.polarity", self.polarity, ("bright", "dark"))
+        for name in ("roi_radius_factor", "candidate_threshold", "min_cnr", "max_rms_px",
+                     "radius_tolerance", "radius_prior_sigma", "min_arc"):
+            positive(f"detector.{name}", getattr(self, name))
         for name in ("roi_margin", "min_contrast", "min_confidence", "min_inlier_fraction",
                      "ambiguity_score", "ambiguity_ratio"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0):
-                raise ValueError(f"detector.{name} must be >= 0, got {v!r}")
-        if not (isinstance(self.n_rays, int) and self.n_rays >= 16):
-            raise ValueError(f"detector.n_rays must be an integer >= 16, got {self.n_rays!r}")
-        if not (isinstance(self.max_candidates, int) and self.max_candidates >= 1):
-            raise ValueError("detector.max_candidates must be an integer >= 1")
-        if not math.isfinite(self.ball_plane_z):
-            raise ValueError("detector.ball_plane_z must be finite")
+            nonnegative(f"detector.{name}", getattr(self, name))
+        integer("detector.n_rays", self.n_rays, minimum=16)
+        integer("detector.max_candidates", self.max_candidates, minimum=1)
+        finite("detector.ball_plane_z", self.ball_plane_z)
+        # counts are used as such (array sizes): 64.0 passes the check and becomes 64
+        object.__setattr__(self, "n_rays", int(self.n_rays))
+        object.__setattr__(self, "max_candidates", int(self.max_candidates))
 
 
 def detector_config_from_dict(d: Mapping[str, Any]) -> DetectorConfig:
@@ -416,9 +410,7 @@ class BallDetector:
 
     def __init__(self, camera: CameraModel, ball_radius: float,
                  config: DetectorConfig | None = None) -> None:
-        if not (isinstance(ball_radius, (int, float)) and math.isfinite(ball_radius)
-                and ball_radius > 0):
-            raise ValueError(f"ball_radius must be a positive number [m], got {ball_radius!r}")
+        positive("ball.radius", ball_radius)
         self.camera = camera
         self.ball_radius = float(ball_radius)
         self.config = config if config is not None else DetectorConfig()

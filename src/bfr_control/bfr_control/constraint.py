@@ -46,6 +46,7 @@ from typing import Any
 import numpy as np
 from bfr_model.dynamics import RigidModel
 from bfr_model.geometry import offset_kernel
+from bfr_model.param_file import check, finite, integer
 from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["ConstraintSpec", "VirtualConstraint", "contour_period"]
@@ -73,18 +74,14 @@ class ConstraintSpec:
     fourier_sin: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
-        if not math.isfinite(self.c):
-            raise ValueError(f"constraint.c must be finite, got {self.c}")
+        finite("constraint.c", self.c)
         n = len(self.fourier_orders)
-        if len(self.fourier_cos) != n or len(self.fourier_sin) != n:
-            raise ValueError("constraint.fourier_orders, fourier_cos and fourier_sin must have "
-                             "equal lengths")
+        check(len(self.fourier_cos) == n and len(self.fourier_sin) == n, "constraint.fourier_*",
+              "fourier_orders, fourier_cos and fourier_sin must have equal lengths")
         for k in self.fourier_orders:
-            if int(k) != k or k < 1:
-                raise ValueError(f"constraint.fourier_orders must be integers >= 1, got {k}")
+            integer("constraint.fourier_orders", k, minimum=1)
         for v in (*self.fourier_cos, *self.fourier_sin):
-            if not math.isfinite(v):
-                raise ValueError("constraint.fourier_cos/sin must be finite")
+            finite("constraint.fourier_cos/sin", v)
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> ConstraintSpec:

@@ -39,7 +39,14 @@ from typing import Any
 
 import numpy as np
 from bfr_model.dynamics import RigidModel
-from bfr_model.param_file import ParameterError, config_path, load_ros_parameters
+from bfr_model.param_file import (
+    ParameterError,
+    config_path,
+    integer,
+    load_ros_parameters,
+    nonnegative,
+    positive,
+)
 from bfr_model.params import RigParams
 
 from bfr_control.constraint import ConstraintSpec, VirtualConstraint
@@ -89,14 +96,10 @@ class ControlConfig:
     friction_smoothing: float = 0.05
 
     def __post_init__(self) -> None:
-        for name in ("rate", "friction_smoothing"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"control.{name} must be > 0, got {v}")
-        for name in ("friction_viscous", "friction_coulomb"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"control.{name} must be >= 0, got {v}")
+        positive("control.rate", self.rate)
+        positive("control.friction_smoothing", self.friction_smoothing)
+        nonnegative("control.friction_viscous", self.friction_viscous)
+        nonnegative("control.friction_coulomb", self.friction_coulomb)
 
 
 @dataclass(frozen=True)
@@ -124,12 +127,9 @@ class SupervisorConfig:
     max_abs_z: float = 2.0
 
     def __post_init__(self) -> None:
-        if int(self.acquire_frames) != self.acquire_frames or self.acquire_frames < 1:
-            raise ValueError("supervisor.acquire_frames must be an integer >= 1")
+        integer("supervisor.acquire_frames", self.acquire_frames, minimum=1)
         for name in ("lost_timeout", "min_phi_dot", "max_abs_y", "max_abs_z"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"supervisor.{name} must be > 0, got {v}")
+            positive(f"supervisor.{name}", getattr(self, name))
 
 
 @dataclass(frozen=True)

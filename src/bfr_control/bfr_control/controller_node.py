@@ -40,7 +40,7 @@ import math
 import time
 from typing import Any
 
-from bfr_model.param_file import config_path
+from bfr_model.param_file import config_path, one_of
 from bfr_model.params import default_params_path, params_from_dict
 from bfr_ros.node_common import (
     COMMAND_QOS,
@@ -104,9 +104,7 @@ class ControllerNode(Node):
         setup = time.perf_counter() - t0
         loop, safety = p["loop"], p["safety"]
         self.trigger = str(loop["trigger"]).lower()
-        if self.trigger not in ("observation", "joint_states", "timer"):
-            raise ValueError(f"loop.trigger must be observation, joint_states or timer, got "
-                             f"{loop['trigger']!r}")
+        one_of("loop.trigger", self.trigger, ("observation", "joint_states", "timer"))
         self.joint_name = str(loop["joint_name"])
         self.max_gap_ns = round(float(loop["max_step_gap"]) * _NS)
         self.watchdog_timeout = float(safety["watchdog_timeout"])

@@ -42,6 +42,7 @@ import numpy as np
 from bfr_model.dynamics import RigidModel, rigid_terms
 from bfr_model.geometry import offset_kernel
 from bfr_model.jit import njit
+from bfr_model.param_file import positive
 
 from bfr_control.orbit import PeriodicOrbit
 from bfr_control.periodic import PeriodicTable
@@ -93,9 +94,7 @@ class EstimatorConfig:
 
     def __post_init__(self) -> None:
         for name in ("camera_noise", "accel_noise", "phi_dot_sigma0", "history"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"estimator.{name} must be > 0, got {v}")
+            positive(f"estimator.{name}", getattr(self, name))
 
 
 @njit

@@ -41,6 +41,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 from bfr_model.dynamics import RigidModel, mass_terms, rigid_terms
+from bfr_model.param_file import check, integer, positive
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import brentq
 
@@ -75,13 +76,14 @@ class OrbitSpec:
     grid: int = 2048
 
     def __post_init__(self) -> None:
-        if (self.mean_phi_dot is None) == (self.phi_dot_0 is None):
-            raise ValueError("orbit: set exactly one of mean_phi_dot and phi_dot_0")
-        v = self.mean_phi_dot if self.mean_phi_dot is not None else self.phi_dot_0
-        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0.0):
-            raise ValueError(f"orbit speed must be a positive number of rad/s, got {v!r}")
-        if self.grid < 64 or self.grid % 2:
-            raise ValueError(f"orbit.grid must be an even integer >= 64, got {self.grid}")
+        check((self.mean_phi_dot is None) != (self.phi_dot_0 is None),
+              "orbit.mean_phi_dot/phi_dot_0", "set exactly one of the two")
+        if self.mean_phi_dot is not None:
+            positive("orbit.mean_phi_dot", self.mean_phi_dot)
+        else:
+            positive("orbit.phi_dot_0", self.phi_dot_0)
+        integer("orbit.grid", self.grid, minimum=64)
+        check(self.grid % 2 == 0, "orbit.grid", f"must be even, got {self.grid!r}")
 
     def to_json(self) -> str:
         """Canonical JSON (cache keys)."""

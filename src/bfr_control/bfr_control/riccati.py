@@ -41,6 +41,7 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
+from bfr_model.param_file import integer, positive
 from bfr_model.params import params_to_dict
 from numpy.typing import NDArray
 from scipy.linalg import solve_continuous_are
@@ -86,11 +87,8 @@ class RiccatiWeights:
 
     def __post_init__(self) -> None:
         for name in ("q_I", "q_y", "q_y_dot", "gamma", "tol"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v > 0.0):
-                raise ValueError(f"riccati.{name} must be > 0, got {v}")
-        if self.max_periods < 1:
-            raise ValueError("riccati.max_periods must be >= 1")
+            positive(f"riccati.{name}", getattr(self, name))
+        integer("riccati.max_periods", self.max_periods, minimum=1)
 
     @property
     def q_matrix(self) -> FloatArray:

@@ -102,7 +102,7 @@ class Fit:
         return [(EFFECTS[n], v) for n, v in zip(self.effects, self.values, strict=True)]
 
 
-@dataclass
+@dataclass(frozen=True, kw_only=True)
 class Selection:
     """Result of the greedy selection (see module docstring)."""
 
@@ -419,6 +419,53 @@ def _corr_between(fit: Fit, a: str, b: str) -> float:
     return float(np.max(np.abs(block))) if block.size else float("nan")
 
 
+@dataclass(frozen=True, kw_only=True)
+class _Criteria:
+    """What a candidate must reach, and how it is screened (see :func:`select_effects`)."""
+
+    thresholds: dict[str, float]
+    dbic_min: float
+    confound_corr: float
+    screen_top: int
+    screen_frac: float
+    degenerate_corr: float
+
+    def threshold(self, name: str) -> float:
+        """Held-out gain the effect ``name`` must exceed (0 when the null has none)."""
+        return self.thresholds.get(name, 0.0)
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Screened:
+    """A candidate's linearised fit: one Gauss-Newton step (:meth:`Problem.linear_fit`)."""
+
+    values: FloatArray      # the stepped parameter values (bounded)
+    gain: float             # held-out gain of the linearised residual
+    cost_train: float       # training cost of the linearised residual
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Stage:
+    """Where a stage of the selection starts: the chosen effects and their costs."""
+
+    index: int              # 0-based; reported 1-based
+    chosen: Chosen
+    cost_train: float
+    cost_test: float
+    w: FloatArray           # weighted residual of the chosen effects, shape (rows, n)
+    n_eff: float            # effective number of training samples (for the BIC)
+
+    @property
+    def costs(self) -> tuple[float, float]:
+        """(training cost, held-out cost) of the chosen effects."""
+        return self.cost_train, self.cost_test
+
+    @property
+    def chosen_names(self) -> list[str]:
+        """Names of the chosen effects."""
+        return [e.name for e, _ in self.chosen]
+
+
 def select_effects(prob: Problem, thresholds: dict[str, float], max_effects: int = 3,
                    dbic_min: float = -6.0, confound_corr: float = 0.9,
                    only: list[str] | None = None, progress: Any = None,
@@ -454,6 +501,9 @@ def select_effects(prob: Problem, thresholds: dict[str, float], max_effects: int
         a bound its nominal value is not at, or two parameters of different effects
         correlate beyond this.
     """
+    crit = _Criteria(thresholds=thresholds, dbic_min=dbic_min, confound_corr=confound_corr,
+                     screen_top=screen_top, screen_frac=screen_frac,
+                     degenerate_corr=degenerate_corr)
     cands = [c for c in prob.candidates if only is None or c in only]
     chosen: Chosen = []
     if weights is None:
@@ -461,115 +511,206 @@ def select_effects(prob: Problem, thresholds: dict[str, float], max_effects: int
     else:
         prob.s = (float(weights[0]), float(weights[1]))
     c_tr, c_te, w = prob.cost(chosen)
-    tau = autocorr_time(w[0, prob.train])
-    if prob.has_ball:
-        tau = max(tau, autocorr_time(w[1, prob.train]))
-    n_train = w.shape[0] * int(prob.train.sum())
-    n_eff = n_train / tau
+    tau, n_eff = _effective_samples(prob, w)
     stages: list[dict[str, Any]] = []
     ranking: list[dict[str, Any]] = []
     confounded: list[dict[str, Any]] = []
     final = Fit(effects=[], values=[], cost_train=c_tr, cost_test=c_te, n_params=0)
-    for stage in range(max_effects):
-        cur = (c_tr, c_te)
-        rows = []
-        fits: dict[str, Fit] = {}
-        names = [n for n in cands
-                 if n not in [e.name for e, _ in chosen] or n == "track_bumps"]
-        # screening: one Gauss-Newton step per candidate on top of the chosen effects (the
-        # nominal Jacobians are shared with the null); the promising ones are fitted fully
-        wv = w.ravel()
-        lin = {}
-        for name in names:
-            vals, l_tr, l_te = prob.linear_fit(chosen, EFFECTS[name], wv)
-            lin[name] = (vals, 1.0 - l_te / cur[1] if cur[1] > 0 else 0.0, l_tr)
-        top = sorted(names, key=lambda n: -lin[n][1])[:screen_top]
-        for name in names:
-            eff = EFFECTS[name]
-            thr = thresholds.get(name, 0.0)
-            vals_lin, gain_lin, l_tr = lin[name]
-            full = name in top or gain_lin >= screen_frac * thr
-            degenerate = None
-            if full:
-                # jointly with the chosen effects (all refitted), started from the screening
-                # step: an effect may only show its worth once the others move with it
-                start = np.clip(vals_lin, np.asarray(eff.lower) + 0.5 * np.asarray(eff.scales),
-                                np.asarray(eff.upper) - 0.5 * np.asarray(eff.scales))
-                fit = prob.fit(chosen, eff, start, max_nfev=40)
-                gain, dbic = _stats(prob, cur, fit, n_eff, eff.k)
-                fits[name] = fit
-                vals = display_values(eff, fit.values[-1])
-                degenerate = _degenerate(prob, fit, degenerate_corr)
-                size = effect_size(name, fit.values[-1], prob.base)
-            else:
-                gain = gain_lin
-                dbic = (n_eff * math.log(max(l_tr, 1e-300) / cur[0])
-                        + eff.k * math.log(max(n_eff, 2.0)))
-                vals = display_values(eff, vals_lin)
-                size = effect_size(name, vals_lin, prob.base)
-            big = size >= MIN_SIZE.get(name, 0.0)
-            rows.append({"effect": name, "heldout_gain": gain, "dbic": dbic,
-                         "threshold": thr,
-                         "significant": bool(full and gain > thr and dbic < dbic_min
-                                             and degenerate is None and big),
-                         "degenerate": degenerate,
-                         "size": size, "below_min_size": not big,
-                         "fit": "full" if full else "linearised (screened out)",
-                         "values": dict(zip(eff.names, map(float, vals), strict=True)),
-                         "units": dict(zip(eff.names, eff.units, strict=True))})
-            if progress:
-                progress(f"stage {stage + 1}: {name:24s} held-out gain {gain:+.4f} "
-                         f"(null {thr:.4f}) dBIC {dbic:+.1f}"
-                         + ("" if full else " [linearised]")
-                         + (f" [degenerate: {degenerate}]" if degenerate else "")
-                         + ("" if big else f" [size {size:.2g} below {MIN_SIZE[name]:g}]"))
-        rows.sort(key=lambda r: -r["heldout_gain"])
-        stages.append({"stage": stage + 1, "candidates": rows,
+    for index in range(max_effects):
+        st = _Stage(index=index, chosen=chosen, cost_train=c_tr, cost_test=c_te, w=w,
+                    n_eff=n_eff)
+        rows, fits = _assess_candidates(prob, st, cands, crit, progress)
+        stages.append({"stage": index + 1, "candidates": rows,
                        "cost_train": c_tr, "cost_test": c_te})
-        if stage == 0:
+        if index == 0:
             ranking = rows
-        names_chosen = [e.name for e, _ in chosen]
-        for r in rows:
-            if r["degenerate"] and r["heldout_gain"] > r["threshold"]:
-                _add_confound(confounded, stage + 1, [*names_chosen, r["effect"]],
-                              "degenerate", float("nan"),
-                              (f"{r['effect']} cannot be fitted together with "
-                               f"{', '.join(names_chosen)}: {r['degenerate']} (the data "
-                               "fix only a combination of them); not added") if names_chosen
-                              else (f"{r['effect']} alone is degenerate: {r['degenerate']} "
-                                    "(it can only reduce the residual by running to a bound);"
-                                    " not added at this stage"))
+        _note_degenerate(confounded, st, rows)
         sig = [r for r in rows if r["significant"]]
         if not sig:
             break
         best = sig[0]
-        # a confound: a runner-up explains almost as much and their parameters correlate
-        for other in rows:
-            if (other is best or other["effect"] == best["effect"] or other["degenerate"]
-                    or other["heldout_gain"] < 0.8 * best["heldout_gain"]
-                    or other["heldout_gain"] <= 0):
-                continue
-            e_b = EFFECTS[other["effect"]]
-            pair_fit = prob.fit(fits[best["effect"]].chosen(), e_b, None, max_nfev=40)
-            rho = _corr_between(pair_fit, best["effect"], other["effect"])
-            extra_gain = 1.0 - pair_fit.cost_test / fits[best["effect"]].cost_test
-            if rho > confound_corr or extra_gain < 0.1 * best["heldout_gain"]:
-                _add_confound(confounded, stage + 1, [best["effect"], other["effect"]], "pair",
-                              rho, f"{best['effect']} and {other['effect']} explain the same "
-                              f"residual (held-out gains {best['heldout_gain']:.3f} vs "
-                              f"{other['heldout_gain']:.3f}, parameter correlation "
-                              f"{rho:.2f}): the data cannot tell them apart; "
-                              f"{best['effect']} is kept as the larger")
+        _note_confounds(prob, confounded, st, rows, best, fits[best["effect"]],
+                        crit.confound_corr)
         final = fits[best["effect"]]
         chosen = final.chosen()
         c_tr, c_te, w = prob.cost(chosen)
         final.cost_train, final.cost_test = c_tr, c_te
     params, sensor = apply_effects(prob.base, chosen)
-    out = Selection(chosen=[e.name for e, _ in chosen], final=final, stages=stages,
-                    ranking=ranking, confounded=confounded, weights=prob.s, tau=tau,
-                    params=params, sensor=sensor)
-    out.parameters = parameter_table(final, tau, prob.has_ball)
+    return Selection(chosen=[e.name for e, _ in chosen], final=final, stages=stages,
+                     ranking=ranking, confounded=confounded, weights=prob.s, tau=tau,
+                     params=params, sensor=sensor,
+                     parameters=parameter_table(final, tau, prob.has_ball))
+
+
+def _effective_samples(prob: Problem, w: FloatArray) -> tuple[float, float]:
+    """Autocorrelation time and effective number of training samples of ``w``.
+
+    ``tau`` [samples]: of the weighted residual ``w`` on the training blocks, the larger of
+    the rows; the effective number is the training samples of all rows over ``tau``.
+    """
+    tau = autocorr_time(w[0, prob.train])
+    if prob.has_ball:
+        tau = max(tau, autocorr_time(w[1, prob.train]))
+    n_train = w.shape[0] * int(prob.train.sum())
+    return tau, n_train / tau
+
+
+def _screen(prob: Problem, st: _Stage, names: list[str]) -> dict[str, _Screened]:
+    """One Gauss-Newton step per candidate on top of the chosen effects (the screening).
+
+    At the first stage the nominal Jacobians are shared with the null.
+    """
+    wv = st.w.ravel()
+    cur_test = st.cost_test
+    out = {}
+    for name in names:
+        vals, l_tr, l_te = prob.linear_fit(st.chosen, EFFECTS[name], wv)
+        out[name] = _Screened(values=vals, gain=1.0 - l_te / cur_test if cur_test > 0 else 0.0,
+                              cost_train=l_tr)
     return out
+
+
+def _assess_candidates(prob: Problem, st: _Stage, cands: list[str], crit: _Criteria,
+                       progress: Any) -> tuple[list[dict[str, Any]], dict[str, Fit]]:
+    """Screen every candidate of a stage, fit the promising ones fully, rate them all.
+
+    Returns
+    -------
+    rows : list of dict
+        One row per candidate (:func:`_assess`), best held-out gain first.
+    fits : dict
+        The full joint fits, by the name of the candidate added.
+    """
+    chosen_names = st.chosen_names
+    names = [n for n in cands if n not in chosen_names or n == "track_bumps"]
+    screened = _screen(prob, st, names)
+    top = sorted(names, key=lambda n: -screened[n].gain)[:crit.screen_top]
+    rows = []
+    fits: dict[str, Fit] = {}
+    for name in names:
+        full = name in top or screened[name].gain >= crit.screen_frac * crit.threshold(name)
+        row, fit = _assess(prob, st, name, screened[name], full, crit)
+        if fit is not None:
+            fits[name] = fit
+        rows.append(row)
+        if progress:
+            progress(_describe(st.index, row))
+    rows.sort(key=lambda r: -r["heldout_gain"])
+    return rows, fits
+
+
+def _assess(prob: Problem, st: _Stage, name: str, screened: _Screened, full: bool,
+            crit: _Criteria) -> tuple[dict[str, Any], Fit | None]:
+    """Rate one candidate added to the chosen effects.
+
+    Parameters
+    ----------
+    prob : Problem
+        The problem.
+    st : _Stage
+        The stage (chosen effects, their costs, the effective sample size).
+    name : str
+        The candidate.
+    screened : _Screened
+        Its linearised fit.
+    full : bool
+        Fit it fully, jointly with the chosen effects (all refitted, started from the
+        screening step: an effect may only show its worth once the others move with it);
+        otherwise it is rated by its linearised fit.
+    crit : _Criteria
+        Thresholds and limits.
+
+    Returns
+    -------
+    row : dict
+        Held-out gain, dBIC, threshold, significance, degeneracy, size, fitted values.
+    fit : Fit or None
+        The full joint fit (None when only linearised).
+    """
+    eff = EFFECTS[name]
+    thr = crit.threshold(name)
+    degenerate = None
+    fit = None
+    if full:
+        start = np.clip(screened.values,
+                        np.asarray(eff.lower) + 0.5 * np.asarray(eff.scales),
+                        np.asarray(eff.upper) - 0.5 * np.asarray(eff.scales))
+        fit = prob.fit(st.chosen, eff, start, max_nfev=40)
+        gain, dbic = _stats(prob, st.costs, fit, st.n_eff, eff.k)
+        vals = display_values(eff, fit.values[-1])
+        degenerate = _degenerate(prob, fit, crit.degenerate_corr)
+        size = effect_size(name, fit.values[-1], prob.base)
+    else:
+        gain = screened.gain
+        dbic = (st.n_eff * math.log(max(screened.cost_train, 1e-300) / st.cost_train)
+                + eff.k * math.log(max(st.n_eff, 2.0)))
+        vals = display_values(eff, screened.values)
+        size = effect_size(name, screened.values, prob.base)
+    big = size >= MIN_SIZE.get(name, 0.0)
+    row = {"effect": name, "heldout_gain": gain, "dbic": dbic,
+           "threshold": thr,
+           "significant": bool(full and gain > thr and dbic < crit.dbic_min
+                               and degenerate is None and big),
+           "degenerate": degenerate,
+           "size": size, "below_min_size": not big,
+           "fit": "full" if full else "linearised (screened out)",
+           "values": dict(zip(eff.names, map(float, vals), strict=True)),
+           "units": dict(zip(eff.names, eff.units, strict=True))}
+    return row, fit
+
+
+def _describe(index: int, row: dict[str, Any]) -> str:
+    """The progress line of one candidate's row (:func:`_assess`) at stage ``index``."""
+    name = row["effect"]
+    return (f"stage {index + 1}: {name:24s} held-out gain {row['heldout_gain']:+.4f} "
+            f"(null {row['threshold']:.4f}) dBIC {row['dbic']:+.1f}"
+            + ("" if row["fit"] == "full" else " [linearised]")
+            + (f" [degenerate: {row['degenerate']}]" if row["degenerate"] else "")
+            + ("" if not row["below_min_size"]
+               else f" [size {row['size']:.2g} below {MIN_SIZE[name]:g}]"))
+
+
+def _note_degenerate(confounded: list[dict[str, Any]], st: _Stage,
+                     rows: list[dict[str, Any]]) -> None:
+    """Report the candidates that beat their threshold but whose joint fit is degenerate."""
+    names_chosen = st.chosen_names
+    for r in rows:
+        if r["degenerate"] and r["heldout_gain"] > r["threshold"]:
+            _add_confound(confounded, st.index + 1, [*names_chosen, r["effect"]],
+                          "degenerate", float("nan"),
+                          (f"{r['effect']} cannot be fitted together with "
+                           f"{', '.join(names_chosen)}: {r['degenerate']} (the data "
+                           "fix only a combination of them); not added") if names_chosen
+                          else (f"{r['effect']} alone is degenerate: {r['degenerate']} "
+                                "(it can only reduce the residual by running to a bound);"
+                                " not added at this stage"))
+
+
+def _note_confounds(prob: Problem, confounded: list[dict[str, Any]], st: _Stage,
+                    rows: list[dict[str, Any]], best: dict[str, Any], best_fit: Fit,
+                    confound_corr: float) -> None:
+    """Report the runners-up that explain the same residual as the stage's best.
+
+    A runner-up within 80 % of the best's held-out gain is fitted jointly with it; the pair
+    is confounded when their parameters correlate beyond ``confound_corr`` or the
+    runner-up adds less than a tenth of the best's gain.
+    """
+    for other in rows:
+        if (other is best or other["effect"] == best["effect"] or other["degenerate"]
+                or other["heldout_gain"] < 0.8 * best["heldout_gain"]
+                or other["heldout_gain"] <= 0):
+            continue
+        e_b = EFFECTS[other["effect"]]
+        pair_fit = prob.fit(best_fit.chosen(), e_b, None, max_nfev=40)
+        rho = _corr_between(pair_fit, best["effect"], other["effect"])
+        extra_gain = 1.0 - pair_fit.cost_test / best_fit.cost_test
+        if rho > confound_corr or extra_gain < 0.1 * best["heldout_gain"]:
+            _add_confound(confounded, st.index + 1, [best["effect"], other["effect"]], "pair",
+                          rho, f"{best['effect']} and {other['effect']} explain the same "
+                          f"residual (held-out gains {best['heldout_gain']:.3f} vs "
+                          f"{other['heldout_gain']:.3f}, parameter correlation "
+                          f"{rho:.2f}): the data cannot tell them apart; "
+                          f"{best['effect']} is kept as the larger")
 
 
 def parameter_table(fit: Fit, tau: float, has_ball: bool) -> list[dict[str, Any]]:

@@ -20,6 +20,7 @@ width (near-independent samples).
 from __future__ import annotations
 
 import itertools
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -82,45 +83,107 @@ def locate(prep: Prepared, res: Residual, sigma: tuple[float, float], tau: float
         ``global`` (per-row RMS ratio and p-value), ``windows`` (flagged, worst first),
         ``n_windows``, ``regions`` (flagged state bins, worst first), ``all_regions``.
     """
+    rows = _rows_under_null(prep, res, sigma, msq)
+    glob = {}
+    for name, row in rows.items():
+        ratio, p = _test(row.r, row.msq, tau)
+        glob[name] = {"rms_over_noise": ratio, "p_value": p, "significant": bool(p < alpha)}
+    windows, n_windows = _windows(prep.t[res.idx], rows, tau, window, alpha)
+    regs = _regions(_region_bins(prep, res), rows, tau, alpha)
+    # the regions where the mismatch concentrates: significant, largest excess first
+    sig = [e for e in regs if e["significant"]]
+    sig.sort(key=lambda e: -max(e[k]["rms_over_noise"] for k in rows))
+    return {"global": glob, "windows": windows, "regions": sig[:8], "all_regions": regs,
+            "n_windows": n_windows, "flagged_fraction": len(windows) / max(n_windows, 1)}
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class _Row:
+    """One equation row's residual and its expected square under the null, per sample."""
+
+    r: FloatArray       # [N m]
+    msq: FloatArray     # [N^2 m^2]
+
+
+def _rows_under_null(prep: Prepared, res: Residual, sigma: tuple[float, float],
+                     msq: list[FloatArray] | None) -> dict[str, _Row]:
+    """The rows to test, by name: the null's ``msq`` where given, else ``sigma^2``."""
     idx = res.idx
-    t = prep.t[idx]
 
     def expected(i: int) -> FloatArray:
         if msq is not None and msq[i] is not None and np.size(msq[i]) == idx.size:
             return np.asarray(msq[i], float)
         return np.full(idx.size, float(sigma[i]) ** 2)
 
-    rows = {"frame_torque_row": (res.r1, expected(0))}
+    rows = {"frame_torque_row": _Row(r=res.r1, msq=expected(0))}
     if prep.has_ball:
-        rows["ball_row"] = (res.r2, expected(1))
-    out: dict[str, Any] = {"global": {}, "windows": [], "regions": [], "all_regions": []}
-    for name, (r, s) in rows.items():
-        ratio, p = _test(r, s, tau)
-        out["global"][name] = {"rms_over_noise": ratio, "p_value": p,
-                               "significant": bool(p < alpha)}
+        rows["ball_row"] = _Row(r=res.r2, msq=expected(1))
+    return rows
+
+
+def _tested(rows: dict[str, _Row], m: NDArray[np.bool_], tau: float) -> dict[str, Any]:
+    """Each row's RMS ratio to the noise and p-value on the samples ``m``, and the least p.
+
+    Returns
+    -------
+    dict
+        ``{row: {"rms_over_noise", "p_value"}}`` and ``p_min``.
+    """
+    entry: dict[str, Any] = {}
+    worst = 1.0
+    for name, row in rows.items():
+        ratio, p = _test(row.r[m], row.msq[m], tau)
+        entry[name] = {"rms_over_noise": ratio, "p_value": p}
+        worst = min(worst, p)
+    entry["p_min"] = worst
+    return entry
+
+
+def _windows(t: FloatArray, rows: dict[str, _Row], tau: float, window: float,
+             alpha: float) -> tuple[list[dict[str, Any]], int]:
+    """Windows of ``window`` seconds where a row exceeds the noise (Bonferroni).
+
+    Parameters
+    ----------
+    t : ndarray
+        Times of the residual samples [s].
+    rows : dict
+        The rows to test (:func:`_rows_under_null`).
+    tau : float
+        Autocorrelation time under the null [samples].
+    window, alpha : float
+        Window length [s] and family-wise significance level.
+
+    Returns
+    -------
+    flagged : list of dict
+        ``t0``, ``t1``, per row ``rms_over_noise`` and ``p_value``, ``p_min`` and
+        ``signals`` (the rows that exceed), most significant first.
+    n_windows : int
+        Windows tested (those with at least 5 samples).
+    """
     edges = np.arange(t[0], t[-1] + window, window)
     wins = []
     for a, b in itertools.pairwise(edges):
         m = (t >= a) & (t < b)
         if m.sum() < 5:
             continue
-        entry: dict[str, Any] = {"t0": float(a), "t1": float(b)}
-        worst = 1.0
-        for name, (r, s) in rows.items():
-            ratio, p = _test(r[m], s[m], tau)
-            entry[name] = {"rms_over_noise": ratio, "p_value": p}
-            worst = min(worst, p)
-        entry["p_min"] = worst
-        wins.append(entry)
+        wins.append({"t0": float(a), "t1": float(b), **_tested(rows, m, tau)})
     n_w = max(len(wins), 1)
     flagged = [w for w in wins if w["p_min"] < alpha / n_w]
     for w in flagged:
         w["signals"] = [k for k in rows if w[k]["p_value"] < alpha / n_w]
     flagged.sort(key=lambda w: w["p_min"])
-    out["windows"] = flagged
-    out["n_windows"] = len(wins)
-    out["flagged_fraction"] = len(flagged) / n_w
-    # state regions
+    return flagged, len(wins)
+
+
+def _region_bins(prep: Prepared, res: Residual) -> list[tuple[str, NDArray[np.bool_]]]:
+    """``(label, mask over the residual samples)`` of each state region tested.
+
+    Frame speed and its sign, torque level (terciles), and with a ball its place on the
+    frame (``phi mod 2 pi`` in 30-degree bins) and the normal force (contact phase).
+    """
+    idx = res.idx
     thd = prep.theta_dot[idx]
     u = prep.u[idx]
     bins: list[tuple[str, NDArray[np.bool_]]] = []
@@ -148,30 +211,29 @@ def locate(prep: Prepared, res: Residual, sigma: tuple[float, float], tau: float
         bins.append((f"normal force in [{fq[0]:.3g}, {fq[1]:.3g}) N", (fn >= fq[0])
                      & (fn < fq[1])))
         bins.append((f"normal force >= {fq[1]:.3g} N", fn >= fq[1]))
+    return bins
+
+
+def _regions(bins: list[tuple[str, NDArray[np.bool_]]], rows: dict[str, _Row], tau: float,
+             alpha: float) -> list[dict[str, Any]]:
+    """Test every region with at least 10 samples (Bonferroni over the regions tested).
+
+    Returns
+    -------
+    list of dict
+        ``region``, ``fraction`` of the samples, per row ``rms_over_noise`` and
+        ``p_value``, ``p_min``, ``significant`` and ``signals`` (the rows that exceed).
+    """
     regs = []
     for lab, m in bins:
         if m.sum() < 10:
             continue
-        entry = {"region": lab, "fraction": float(m.mean())}
-        worst = 1.0
-        for name, (r, s) in rows.items():
-            ratio, p = _test(r[m], s[m], tau)
-            entry[name] = {"rms_over_noise": ratio, "p_value": p}
-            worst = min(worst, p)
-        entry["p_min"] = worst
-        regs.append(entry)
+        regs.append({"region": lab, "fraction": float(m.mean()), **_tested(rows, m, tau)})
     n_r = max(len(regs), 1)
     for e in regs:
         e["significant"] = bool(e["p_min"] < alpha / n_r)
         e["signals"] = [k for k in rows if e[k]["p_value"] < alpha / n_r]
-    out["all_regions"] = regs
-    # the regions where the mismatch concentrates: significant and above the median excess
-    sig = [e for e in regs if e["significant"]]
-    key = "ball_row" if prep.has_ball else "frame_torque_row"
-    sig.sort(key=lambda e: -max(e[k]["rms_over_noise"] for k in rows))
-    out["regions"] = sig[:8]
-    del key
-    return out
+    return regs
 
 
 def ljung_box(r: FloatArray, lag_step: int, lags: int = 10) -> dict[str, float]:

@@ -66,7 +66,7 @@ from bfr_diagnose import DiagnoseError
 from bfr_diagnose.effects import EFFECTS
 from bfr_diagnose.identify import Problem, _stats, autocorr_time
 from bfr_diagnose.preprocess import Prepared, PrepConfig, prepare, prepare_runs
-from bfr_diagnose.residual import ResidualConfig, ResidualEvaluator
+from bfr_diagnose.residual import Residual, ResidualConfig, ResidualEvaluator
 
 __all__ = ["NullCalibration", "calibrate_null", "noisy_copy"]
 
@@ -235,14 +235,80 @@ def calibrate_null(prep: Prepared, base: RigParams, pcfg: PrepConfig, rcfg: Resi
     rng = np.random.default_rng(seed)
     recs = list(rec) if isinstance(rec, (list, tuple)) else [rec]
     levels = _levels(prep)
-    if problem is not None:
-        prob = problem
-        ev = prob.ev
-    else:
-        ev = evaluator or ResidualEvaluator(prep, rcfg)
-        prob = Problem(ev, base, block)
+    prob = (problem if problem is not None
+            else Problem(evaluator or ResidualEvaluator(prep, rcfg), base, block))
+    ev = prob.ev
     rows0 = ev.evaluate(base)
-    noise_rows = []
+    draws = _noise_draws(recs, prep, base, pcfg, rcfg, ev, rows0, levels, runs, rng)
+    proc_note = ""
+    if processing:
+        term = _processing_term(recs, prep, base, pcfg, rcfg, ev, rows0)
+        if term is not None:
+            draws = [d + term for d in draws]
+            proc_note = ("; plus twice the residual's change with the filter widths "
+                         "(x1.4), the processing's own resolution")
+    has_ball = prep.has_ball
+    s1, s2, taus = _set_weights(prob, draws)
+    if progress:
+        rows = f"{s1:.3g}, {s2:.3g} N m" if has_ball else f"{s1:.3g} N m (frame row)"
+        progress(f"null: {runs} noise injections (camera {levels['camera'] * 1e3:.3f} mm, "
+                 f"theta {levels['theta']:.2g} rad, theta_dot {levels['theta_dot']:.2g} "
+                 f"rad/s): row noise {rows}")
+    gains = _null_gains(prob, base, draws)
+    thresholds = {n: float(margin * max(*v, 0.0) + floor) for n, v in gains.items()}
+    msq, rms = _expected_squares(draws, has_ball)
+    return NullCalibration(
+        sigma=[s1, s2], gains=gains, thresholds=thresholds, tau=float(np.median(taus)),
+        runs=runs, noise=levels, rms_null=rms, msq=msq,
+        source=(f"{runs} noise injections into the recording itself (camera "
+                f"{levels['camera'] * 1e3:.3g} mm per axis, theta {levels['theta']:.2g} rad, "
+                f"logged theta_dot {levels['theta_dot']:.2g} rad/s){proc_note}"))
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class _Draw:
+    """One draw of the noise residual: its contribution to the nominal rows 1, 2 [N m]."""
+
+    r1: FloatArray
+    r2: FloatArray
+
+    def __add__(self, other: _Draw) -> _Draw:
+        return _Draw(r1=self.r1 + other.r1, r2=self.r2 + other.r2)
+
+
+def _noise_draws(recs: list[Recording], prep: Prepared, base: RigParams, pcfg: PrepConfig,
+                 rcfg: ResidualConfig, ev: ResidualEvaluator, rows0: Residual,
+                 levels: dict[str, float], runs: int, rng: np.random.Generator
+                 ) -> list[_Draw]:
+    """``r(data + noise) - r(data)`` of ``runs`` noise injections (module docstring).
+
+    Parameters
+    ----------
+    recs : list of Recording
+        The raw runs (each gets its own noise; prepared and stitched like ``prep``).
+    prep : Prepared
+        The recording, preprocessed.
+    base : RigParams
+        Nominal parameters.
+    pcfg, rcfg : PrepConfig, ResidualConfig
+        The diagnosis's settings.
+    ev : ResidualEvaluator
+        The recording's evaluator.
+    rows0 : Residual
+        Its nominal residual.
+    levels : dict
+        Noise levels to inject (:func:`_levels`).
+    runs : int
+        Number of draws.
+    rng : numpy.random.Generator
+        The noise generator.
+
+    Raises
+    ------
+    RuntimeError
+        The noise changed which samples are usable.
+    """
+    draws = []
     for _ in range(runs):
         res = prep.info.get("theta_resolution")
         p_n = prepare_runs([noisy_copy(r, levels, rng, res) for r in recs], pcfg,
@@ -251,43 +317,80 @@ def calibrate_null(prep: Prepared, base: RigParams, pcfg: PrepConfig, rcfg: Resi
         if ev_n.idx.size != ev.idx.size or not np.array_equal(ev_n.idx, ev.idx):
             raise RuntimeError("noise injection changed the usable samples")
         r = ev_n.evaluate(base)
-        noise_rows.append((r.r1 - rows0.r1, r.r2 - rows0.r2))
-    # the processing's own resolution: the same recording with shorter smoothing windows
-    proc_note = ""
-    if processing:
-        alt = replace(pcfg, sg_theta=1.4 * pcfg.sg_theta, sg_ball=1.4 * pcfg.sg_ball,
-                      antialias=1.4 * pcfg.antialias)
-        try:
-            ev_a = ResidualEvaluator(prepare_runs(recs, alt, latency0=prep.latency0), rcfg)
-            if np.array_equal(ev_a.idx, ev.idx):
-                r = ev_a.evaluate(base)
-                d1, d2 = 2.0 * (r.r1 - rows0.r1), 2.0 * (r.r2 - rows0.r2)
-                noise_rows = [(a + d1, b + d2) for a, b in noise_rows]
-                proc_note = ("; plus twice the residual's change with the filter widths "
-                             "(x1.4), the processing's own resolution")
-        except DiagnoseError:
-            pass
-    has_ball = prep.has_ball
-    s1 = _row_scale([a[prob.train] for a, _ in noise_rows])
-    s2 = _row_scale([b[prob.train] for _, b in noise_rows]) if has_ball else 1.0
+        draws.append(_Draw(r1=r.r1 - rows0.r1, r2=r.r2 - rows0.r2))
+    return draws
+
+
+def _processing_term(recs: list[Recording], prep: Prepared, base: RigParams,
+                     pcfg: PrepConfig, rcfg: ResidualConfig, ev: ResidualEvaluator,
+                     rows0: Residual) -> _Draw | None:
+    """The processing's own resolution, added to every draw (module docstring).
+
+    Twice the change of the nominal residual when every filter width (anti-alias,
+    Savitzky-Golay windows) is 1.4 times as long; None when the longer filters change which
+    samples are usable, or leave none.
+    """
+    alt = replace(pcfg, sg_theta=1.4 * pcfg.sg_theta, sg_ball=1.4 * pcfg.sg_ball,
+                  antialias=1.4 * pcfg.antialias)
+    try:
+        ev_a = ResidualEvaluator(prepare_runs(recs, alt, latency0=prep.latency0), rcfg)
+        if not np.array_equal(ev_a.idx, ev.idx):
+            return None
+        r = ev_a.evaluate(base)
+    except DiagnoseError:
+        return None
+    return _Draw(r1=2.0 * (r.r1 - rows0.r1), r2=2.0 * (r.r2 - rows0.r2))
+
+
+def _set_weights(prob: Problem, draws: list[_Draw]) -> tuple[float, float, list[float]]:
+    """Set the problem's row weights to the noise's RMS on the training blocks.
+
+    Returns
+    -------
+    s1, s2 : float
+        RMS noise of rows 1 and 2 [N m] (``s2`` is 1 without a ball).
+    taus : list of float
+        Autocorrelation time of each draw [samples] (the larger of the two rows).
+    """
+    has_ball = prob.has_ball
+    s1 = _row_scale([d.r1[prob.train] for d in draws])
+    s2 = _row_scale([d.r2[prob.train] for d in draws]) if has_ball else 1.0
     prob.s = (s1, s2)
     taus = []
-    for a, b in noise_rows:
-        t = autocorr_time(a[prob.train] / s1)
+    for d in draws:
+        t = autocorr_time(d.r1[prob.train] / s1)
         if has_ball:
-            t = max(t, autocorr_time(b[prob.train] / s2))
+            t = max(t, autocorr_time(d.r2[prob.train] / s2))
         taus.append(t)
-    if progress:
-        rows = f"{s1:.3g}, {s2:.3g} N m" if has_ball else f"{s1:.3g} N m (frame row)"
-        progress(f"null: {runs} noise injections (camera {levels['camera'] * 1e3:.3f} mm, "
-                 f"theta {levels['theta']:.2g} rad, theta_dot {levels['theta_dot']:.2g} "
-                 f"rad/s): row noise {rows}")
-    # linearised single-effect fits on the pure-noise residual
-    nrow = 2 if has_ball else 1
-    tr = np.tile(prob.train, nrow)
-    te = np.tile(prob.test, nrow)
+    return s1, s2, taus
+
+
+def _expected_squares(draws: list[_Draw], has_ball: bool
+                      ) -> tuple[list[FloatArray], list[float]]:
+    """Mean square of the draws at each sample, rows 1 and 2 [N^2 m^2], and their RMS [N m].
+
+    The RMS of row 2 is NaN without a ball.
+    """
+    msq = [np.mean([d.r1 ** 2 for d in draws], axis=0),
+           np.mean([d.r2 ** 2 for d in draws], axis=0)]
+    rms = [float(np.sqrt(np.nanmean(msq[0]))),
+           float(np.sqrt(np.nanmean(msq[1]))) if has_ball else float("nan")]
+    return msq, rms
+
+
+def _null_gains(prob: Problem, base: RigParams, draws: list[_Draw]) -> dict[str, list[float]]:
+    """Held-out gain of each candidate effect's linearised fit on each noise draw.
+
+    The effect's residual Jacobian at the nominal model (cached in ``prob``, reused by the
+    selection) against the weighted draw; a bump: the best grid position
+    (:func:`_bump_null_gains`). Needs the weights set (:func:`_set_weights`).
+    """
+    s1, s2 = prob.s
+    tr = prob.rows_mask(prob.train)
+    te = prob.rows_mask(prob.test)
     w0 = prob.weighted([]).ravel()
-    es = [np.concatenate([a / s1, b / s2]) if has_ball else a / s1 for a, b in noise_rows]
+    es = [np.concatenate([d.r1 / s1, d.r2 / s2]) if prob.has_ball else d.r1 / s1
+          for d in draws]
     gains: dict[str, list[float]] = {}
     for name in prob.candidates:
         eff = EFFECTS[name]
@@ -298,17 +401,7 @@ def calibrate_null(prep: Prepared, base: RigParams, pcfg: PrepConfig, rcfg: Resi
         D = prob.jacobian([], eff, x0, w0)
         clip0 = np.isclose(x0, np.asarray(eff.lower, float))
         gains[name] = [_linear_gain(D, e, tr, te, clip0) for e in es]
-    thresholds = {n: float(margin * max(*v, 0.0) + floor) for n, v in gains.items()}
-    msq = [np.mean([a ** 2 for a, _ in noise_rows], axis=0),
-           np.mean([b ** 2 for _, b in noise_rows], axis=0)]
-    rms = [float(np.sqrt(np.nanmean(msq[0]))),
-           float(np.sqrt(np.nanmean(msq[1]))) if has_ball else float("nan")]
-    return NullCalibration(
-        sigma=[s1, s2], gains=gains, thresholds=thresholds, tau=float(np.median(taus)),
-        runs=runs, noise=levels, rms_null=rms, msq=msq,
-        source=(f"{runs} noise injections into the recording itself (camera "
-                f"{levels['camera'] * 1e3:.3g} mm per axis, theta {levels['theta']:.2g} rad, "
-                f"logged theta_dot {levels['theta_dot']:.2g} rad/s){proc_note}"))
+    return gains
 
 
 def _bump_null_gains(prob: Problem, es: list[FloatArray], tr: NDArray[np.bool_],

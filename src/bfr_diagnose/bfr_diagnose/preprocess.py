@@ -335,100 +335,183 @@ def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0
     dt = cfg.dt
     tg = rec.t[0] + dt * np.arange(int(np.floor(rec.duration / dt)) + 1)
     info: dict[str, Any] = {"grid_dt": dt}
+    noise_thd = _velocity_noise(rec, tg, dt)
+    res = _theta_resolution(rec)
+    info["theta_resolution"] = float(res)
+    info["theta_coarse"] = bool(res > cfg.coarse_theta)
+    frame = _frame_angle(rec, tg, cfg, res)
+    info["theta_source"] = frame.source
+    u = _torque(rec, tg, cfg)
+    ball = _ball(rec, tg, cfg, latency0)
+    info["ball"] = ball.note
+    frame_ok = np.zeros(tg.size, bool)
+    n_edge = round(cfg.edge / dt)
+    frame_ok[n_edge:tg.size - n_edge] = True
+    if ball.has_ball:
+        # the frame row with ball terms needs the ball: use ball segments only
+        frame_ok &= ball.ok
+    if frame_ok.sum() * dt < cfg.min_segment:
+        raise DiagnoseError("no usable segment after dropping edges and ball gaps")
+    return Prepared(t=tg, theta=frame.theta, theta_dot=frame.theta_dot,
+                    theta_ddot=frame.theta_ddot, u=u, psi_w=ball.psi_w,
+                    psi_w_dot=ball.psi_w_dot, ball_ok=ball.ok, frame_ok=frame_ok,
+                    has_ball=ball.has_ball, latency0=latency0,
+                    noise={"camera": ball.noise, "theta": frame.noise,
+                           "theta_dot": noise_thd}, info=info, fixes=ball.fixes)
+
+
+def _velocity_noise(rec: Recording, tg: FloatArray, dt: float) -> float:
+    """High-frequency scatter [rad/s] of the logged velocity (about a 50 ms quadratic fit)."""
     thd_raw = np.interp(tg, rec.t, rec.theta_dot)
-    noise_thd = float(np.std(thd_raw - savgol_filter(thd_raw, _odd(0.05 / dt), 2)))
+    return float(np.std(thd_raw - savgol_filter(thd_raw, _odd(0.05 / dt), 2)))
+
+
+def _theta_resolution(rec: Recording) -> float:
+    """Encoder resolution [rad]: ``meta["theta_resolution"]``, else theta's smallest step."""
     res = rec.meta.get("theta_resolution")
     if res is None:
         d = np.abs(np.diff(rec.theta))
         d = d[d > 0]
         res = float(np.min(d)) if d.size else 0.0
-    coarse = res > cfg.coarse_theta
-    info["theta_resolution"] = float(res)
-    info["theta_coarse"] = bool(coarse)
-    if coarse:
+    return res
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class _FrameAngle:
+    """The frame's smoothed angle and derivatives on the grid, and how they were obtained."""
+
+    theta: FloatArray         # [rad]
+    theta_dot: FloatArray     # [rad/s]
+    theta_ddot: FloatArray    # [rad/s^2]
+    noise: float              # [rad] noise of the raw angle
+    source: str               # what was done (for the report)
+
+
+def _frame_angle(rec: Recording, tg: FloatArray, cfg: PrepConfig, res: float) -> _FrameAngle:
+    """Frame angle, rate and acceleration on the grid ``tg`` (module docstring, step 2).
+
+    A coarse encoder (resolution ``res`` above ``cfg.coarse_theta``): the logged velocity,
+    advanced by its lag, integrated and fused with the angle (:func:`_coarse_theta`), then
+    Savitzky-Golay smoothed and differentiated. A fine one: the anti-aliased angle,
+    Savitzky-Golay smoothed and differentiated twice.
+    """
+    dt = cfg.dt
+    win = _odd(cfg.sg_theta / dt)
+    if res > cfg.coarse_theta:
         delay = cfg.dtheta_delay
         if delay is None:
             delay = float(rec.meta.get("rig_conventions", {}).get("dtheta_delay_s", 0.0))
         theta, thd = _coarse_theta(rec, tg, cfg, delay)
-        win = _odd(cfg.sg_theta / dt)
-        thd_s = savgol_filter(thd, win, cfg.sg_order)
-        thdd = savgol_filter(thd, win, cfg.sg_order, deriv=1, delta=dt)
-        info["theta_source"] = (f"logged velocity advanced by {delay * 1e3:.1f} ms, integrated "
-                                f"and fused with the coarse angle (resolution {res:.2g} rad)")
-        theta_dot = thd_s
-        noise_theta = float(res) / np.sqrt(12.0)
-    else:
-        th = _antialiased(rec.t, rec.theta, tg, cfg.antialias, hold=False)
-        win = _odd(cfg.sg_theta / dt)
-        theta = savgol_filter(th, win, cfg.sg_order)
-        theta_dot = savgol_filter(th, win, cfg.sg_order, deriv=1, delta=dt)
-        thdd = savgol_filter(th, win, cfg.sg_order, deriv=2, delta=dt)
-        info["theta_source"] = f"encoder angle (resolution {res:.2g} rad), Savitzky-Golay"
-        noise_theta = float(np.std(th - theta))
-    # the held command: cell means on a fine grid, the same anti-alias filter as theta, and
-    # the same Savitzky-Golay smoothing as theta's derivative (one filter on both sides)
-    u = savgol_filter(_antialiased(rec.t, rec.torque, tg, cfg.antialias, hold=True),
-                      _odd(cfg.sg_theta / dt), cfg.sg_order)
+        return _FrameAngle(
+            theta=theta, theta_dot=savgol_filter(thd, win, cfg.sg_order),
+            theta_ddot=savgol_filter(thd, win, cfg.sg_order, deriv=1, delta=dt),
+            noise=float(res) / np.sqrt(12.0),
+            source=(f"logged velocity advanced by {delay * 1e3:.1f} ms, integrated "
+                    f"and fused with the coarse angle (resolution {res:.2g} rad)"))
+    th = _antialiased(rec.t, rec.theta, tg, cfg.antialias, hold=False)
+    theta = savgol_filter(th, win, cfg.sg_order)
+    return _FrameAngle(
+        theta=theta, theta_dot=savgol_filter(th, win, cfg.sg_order, deriv=1, delta=dt),
+        theta_ddot=savgol_filter(th, win, cfg.sg_order, deriv=2, delta=dt),
+        noise=float(np.std(th - theta)),
+        source=f"encoder angle (resolution {res:.2g} rad), Savitzky-Golay")
 
+
+def _torque(rec: Recording, tg: FloatArray, cfg: PrepConfig) -> FloatArray:
+    """The held command on the grid [N m], filtered like theta (one filter on both sides).
+
+    Cell means on a fine grid, the same anti-alias filter as theta, and the same
+    Savitzky-Golay smoothing as theta's derivative.
+    """
+    return savgol_filter(_antialiased(rec.t, rec.torque, tg, cfg.antialias, hold=True),
+                         _odd(cfg.sg_theta / cfg.dt), cfg.sg_order)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class _Ball:
+    """The ball's smoothed world angle on the grid and what is usable of it."""
+
+    has_ball: bool                 # whether the ball rows apply
+    psi_w: FloatArray              # [rad] (NaN outside the fixes' segments)
+    psi_w_dot: FloatArray          # [rad/s]
+    ok: NDArray[np.bool_]          # grid samples inside a usable segment (edges dropped)
+    noise: float                   # [m] camera noise per axis (NaN if not estimated)
+    fixes: _Fixes | None           # the raw fixes (only when the ball rows apply)
+    note: str                      # what was found (for the report)
+
+
+def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _Ball:
+    """The ball from the distinct camera fixes (module docstring, steps 4 to 6).
+
+    Raises
+    ------
+    DiagnoseError
+        ``cfg.ball == "yes"`` but there are no (usable) fixes.
+    """
     nfix = rec.new_fix_mask()
-    want_ball = cfg.ball
-    has_ball = bool(nfix.sum() > 20) and want_ball != "no"
-    if want_ball == "yes" and not has_ball:
+    has_ball = bool(nfix.sum() > 20) and cfg.ball != "no"
+    if cfg.ball == "yes" and not has_ball:
         raise DiagnoseError("--ball yes given but the recording holds no valid ball fixes")
-    psi_w = np.full(tg.size, np.nan)
-    psi_wd = np.full(tg.size, np.nan)
-    ball_ok = np.zeros(tg.size, bool)
-    noise_cam = float("nan")
-    fixes = None
-    n_edge = round(cfg.edge / dt)
-    if has_ball:
-        tf = rec.t[nfix] - latency0
-        # segments between gaps
-        gaps = np.nonzero(np.diff(tf) > cfg.max_gap)[0]
-        bounds = np.concatenate([[0], gaps + 1, [tf.size]])
-        sgw = _odd(cfg.sg_ball / dt)
-        segs = []
-        for a, b in itertools.pairwise(bounds):
-            if b - a < 10:
-                continue
-            i0 = int(np.searchsorted(tg, tf[a], side="left"))
-            i1 = int(np.searchsorted(tg, tf[b - 1], side="right"))
-            if (i1 - i0) * dt < cfg.min_segment + 2 * cfg.edge or i1 - i0 <= sgw:
-                continue
-            segs.append((int(a), int(b), i0, i1))
-            ball_ok[i0 + n_edge:i1 - n_edge] = True
-        fixes = _Fixes(tf=tf, x=rec.ball_x[nfix].astype(float), y=rec.ball_y[nfix].astype(float),
-                       segs=segs, sgw=sgw, order=cfg.sg_order, antialias=cfg.antialias)
-        psi_w, psi_wd = _smooth_ball(fixes, tg, 0.0, 0.0)
-        noise_cam = fix_noise(tf, fixes.x, fixes.y, cfg.max_gap)
-        if not ball_ok.any():
-            if want_ball == "yes":
-                raise DiagnoseError("no usable ball segment (need "
-                                    f"{cfg.min_segment + 2 * cfg.edge:.2g} s of fixes with "
-                                    f"gaps under {cfg.max_gap * 1e3:.0f} ms)")
-            has_ball = False
-            info["ball"] = "no usable ball segment: frame-only analysis"
+    if not has_ball:
+        if int(nfix.sum()) > 0:
+            note = (f"no usable ball data: only {int(nfix.sum())} valid camera fix(es) in "
+                    f"{rec.duration:.1f} s; frame-only analysis (row 1, ball terms off)")
         else:
-            info["ball"] = (f"{len(segments_from_mask(ball_ok))} ball segment(s), "
-                            f"{ball_ok.mean() * 100:.0f} % of the run")
-    elif int(nfix.sum()) > 0:
-        info["ball"] = (f"no usable ball data: only {int(nfix.sum())} valid camera fix(es) in "
-                        f"{rec.duration:.1f} s; frame-only analysis (row 1, ball terms off)")
-    else:
-        info["ball"] = "no ball in the recording: frame-only analysis (row 1, ball terms off)"
-    frame_ok = np.zeros(tg.size, bool)
-    frame_ok[n_edge:tg.size - n_edge] = True
-    if has_ball:
-        # the frame row with ball terms needs the ball: use ball segments only
-        frame_ok &= ball_ok
-    if frame_ok.sum() * dt < cfg.min_segment:
-        raise DiagnoseError("no usable segment after dropping edges and ball gaps")
-    return Prepared(t=tg, theta=theta, theta_dot=theta_dot, theta_ddot=thdd, u=u,
-                    psi_w=psi_w, psi_w_dot=psi_wd, ball_ok=ball_ok, frame_ok=frame_ok,
-                    has_ball=has_ball, latency0=latency0,
-                    noise={"camera": noise_cam, "theta": noise_theta,
-                           "theta_dot": noise_thd}, info=info,
-                    fixes=fixes if has_ball else None)
+            note = "no ball in the recording: frame-only analysis (row 1, ball terms off)"
+        return _Ball(has_ball=False, psi_w=np.full(tg.size, np.nan),
+                     psi_w_dot=np.full(tg.size, np.nan), ok=np.zeros(tg.size, bool),
+                     noise=float("nan"), fixes=None, note=note)
+    fixes, ball_ok = _ball_fixes(rec, nfix, tg, cfg, latency0)
+    psi_w, psi_wd = _smooth_ball(fixes, tg, 0.0, 0.0)
+    noise_cam = fix_noise(fixes.tf, fixes.x, fixes.y, cfg.max_gap)
+    if not ball_ok.any():
+        if cfg.ball == "yes":
+            raise DiagnoseError("no usable ball segment (need "
+                                f"{cfg.min_segment + 2 * cfg.edge:.2g} s of fixes with "
+                                f"gaps under {cfg.max_gap * 1e3:.0f} ms)")
+        return _Ball(has_ball=False, psi_w=psi_w, psi_w_dot=psi_wd, ok=ball_ok,
+                     noise=noise_cam, fixes=None,
+                     note="no usable ball segment: frame-only analysis")
+    return _Ball(has_ball=True, psi_w=psi_w, psi_w_dot=psi_wd, ok=ball_ok, noise=noise_cam,
+                 fixes=fixes, note=(f"{len(segments_from_mask(ball_ok))} ball segment(s), "
+                                    f"{ball_ok.mean() * 100:.0f} % of the run"))
+
+
+def _ball_fixes(rec: Recording, nfix: NDArray[np.bool_], tg: FloatArray, cfg: PrepConfig,
+                latency0: float) -> tuple[_Fixes, NDArray[np.bool_]]:
+    """The distinct fixes, placed at ``t_fix - latency0`` and cut into segments at gaps.
+
+    A segment needs 10 fixes, ``min_segment + 2 edge`` seconds and more grid samples than
+    the Savitzky-Golay window; its first and last ``edge`` seconds are not usable.
+
+    Returns
+    -------
+    fixes : _Fixes
+        The fixes and their segments.
+    ball_ok : ndarray of bool
+        Grid samples inside a segment, edges dropped.
+    """
+    dt = cfg.dt
+    n_edge = round(cfg.edge / dt)
+    tf = rec.t[nfix] - latency0
+    # segments between gaps
+    gaps = np.nonzero(np.diff(tf) > cfg.max_gap)[0]
+    bounds = np.concatenate([[0], gaps + 1, [tf.size]])
+    sgw = _odd(cfg.sg_ball / dt)
+    ball_ok = np.zeros(tg.size, bool)
+    segs = []
+    for a, b in itertools.pairwise(bounds):
+        if b - a < 10:
+            continue
+        i0 = int(np.searchsorted(tg, tf[a], side="left"))
+        i1 = int(np.searchsorted(tg, tf[b - 1], side="right"))
+        if (i1 - i0) * dt < cfg.min_segment + 2 * cfg.edge or i1 - i0 <= sgw:
+            continue
+        segs.append((int(a), int(b), i0, i1))
+        ball_ok[i0 + n_edge:i1 - n_edge] = True
+    fixes = _Fixes(tf=tf, x=rec.ball_x[nfix].astype(float), y=rec.ball_y[nfix].astype(float),
+                   segs=segs, sgw=sgw, order=cfg.sg_order, antialias=cfg.antialias)
+    return fixes, ball_ok
 
 
 def stitch(preps: list[Prepared], gap: float = 0.6) -> Prepared:

@@ -11,6 +11,7 @@ import math
 import os
 import shutil
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -208,19 +209,57 @@ def _markdown(d: Diagnosis, figs: list[str]) -> str:
 
 
 def _plots(d: Diagnosis, out: Path) -> list[str]:
+    """Draw the report's figures into ``out``; returns their file names.
+
+    ``residual_time.png``, ``residual_phi.png`` (with a ball), ``overlay.png`` and
+    ``ranking.png`` (docs/diagnosis.md).
+    """
     import matplotlib  # noqa: PLC0415 - optional heavy: plots only
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415 - optional heavy: plots only
 
-    prep = d.prep
-    t0 = prep.t[0]
-    tk = prep.t[d.res_before.idx] - t0
-    names = []
-    rows = [("frame torque row r1 [N m]", d.res_before.r1, d.res_after.r1, d.null.sigma[0])]
-    if prep.has_ball:
-        rows.append(("ball row r2 [N m]", d.res_before.r2, d.res_after.r2, d.null.sigma[1]))
-    # residual vs time
+    rows = _plot_rows(d)
+    names = [_plot_residual_time(plt, d, rows, out)]
+    if d.prep.has_ball:
+        names.append(_plot_residual_phi(plt, d, rows, out))
+    names.append(_plot_overlay(plt, d, out))
+    names.append(_plot_ranking(plt, d, out))
+    return names
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class _PlotRow:
+    """One equation row as plotted: label, nominal and corrected residual, noise scale."""
+
+    label: str
+    nominal: np.ndarray       # [N m]
+    corrected: np.ndarray     # [N m]
+    sigma: float              # [N m] the null's noise scale
+
+
+def _plot_rows(d: Diagnosis) -> list[_PlotRow]:
+    """The frame's torque row, and the ball's row when the recording has a ball."""
+    rows = [_PlotRow(label="frame torque row r1 [N m]", nominal=d.res_before.r1,
+                     corrected=d.res_after.r1, sigma=d.null.sigma[0])]
+    if d.prep.has_ball:
+        rows.append(_PlotRow(label="ball row r2 [N m]", nominal=d.res_before.r2,
+                             corrected=d.res_after.r2, sigma=d.null.sigma[1]))
+    return rows
+
+
+def _save(plt: Any, fig: Any, out: Path, name: str) -> str:
+    """Lay out, write ``out / name`` at 90 dpi and close the figure; returns ``name``."""
+    fig.tight_layout()
+    fig.savefig(out / name, dpi=90)
+    plt.close(fig)
+    return name
+
+
+def _plot_residual_time(plt: Any, d: Diagnosis, rows: list[_PlotRow], out: Path) -> str:
+    """``residual_time.png``: both rows against time, the windows exceeding the noise red."""
+    t0 = d.prep.t[0]
+    tk = d.prep.t[d.res_before.idx] - t0
     fig, axs = plt.subplots(len(rows), 1, figsize=(10, 2.6 * len(rows)), sharex=True,
                             squeeze=False)
     # break the lines where samples are missing (ball gaps, stitched runs)
@@ -230,41 +269,46 @@ def _plots(d: Diagnosis, out: Path) -> list[str]:
     def broken(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.insert(tk, cut, np.nan), np.insert(np.asarray(y, float), cut, np.nan)
 
-    for ax, (lab, r0, r1, s) in zip(axs[:, 0], rows, strict=True):
-        ax.plot(*broken(r0), lw=0.6, label="nominal")
-        ax.plot(*broken(r1), lw=0.6, label="corrected")
-        ax.axhspan(-2 * s, 2 * s, color="0.85", label="+-2 noise (null)")
+    for ax, row in zip(axs[:, 0], rows, strict=True):
+        ax.plot(*broken(row.nominal), lw=0.6, label="nominal")
+        ax.plot(*broken(row.corrected), lw=0.6, label="corrected")
+        ax.axhspan(-2 * row.sigma, 2 * row.sigma, color="0.85", label="+-2 noise (null)")
         for w in d.summary["located"]["windows"][:40]:
             ax.axvspan(w["t0"] - t0, w["t1"] - t0, color="r", alpha=0.08)
-        ax.set_ylabel(lab)
+        ax.set_ylabel(row.label)
     axs[0, 0].legend(loc="upper right", fontsize=8)
     axs[-1, 0].set_xlabel("t [s] (red: windows exceeding the noise)")
-    fig.tight_layout()
-    fig.savefig(out / "residual_time.png", dpi=90)
-    plt.close(fig)
-    names.append("residual_time.png")
-    # residual vs phi
-    if prep.has_ball:
-        ph = np.mod(d.res_before.phi[d.res_before.idx], 2 * np.pi)
-        ph1 = np.mod(d.res_after.phi[d.res_after.idx], 2 * np.pi)
-        bins = np.linspace(0, 2 * np.pi, 73)
-        fig, axs = plt.subplots(len(rows), 1, figsize=(10, 2.6 * len(rows)), sharex=True,
-                                squeeze=False)
-        for ax, (lab, r0, r1, _s) in zip(axs[:, 0], rows, strict=True):
-            for p, r, name in ((ph, r0, "nominal"), (ph1, r1, "corrected")):
-                k = np.digitize(p, bins) - 1
-                mean = np.array([np.nanmean(r[k == i]) if np.any(k == i) else np.nan
-                                 for i in range(72)])
-                ax.plot(np.degrees(0.5 * (bins[1:] + bins[:-1])), mean, label=name)
-            ax.axhline(0, color="0.5", lw=0.5)
-            ax.set_ylabel("mean " + lab)
-        axs[0, 0].legend(fontsize=8)
-        axs[-1, 0].set_xlabel("ball's place on the frame: contact angle phi mod 360 [deg]")
-        fig.tight_layout()
-        fig.savefig(out / "residual_phi.png", dpi=90)
-        plt.close(fig)
-        names.append("residual_phi.png")
-    # overlay of short-horizon predictions
+    return _save(plt, fig, out, "residual_time.png")
+
+
+def _plot_residual_phi(plt: Any, d: Diagnosis, rows: list[_PlotRow], out: Path) -> str:
+    """``residual_phi.png``: each row's mean in 5-degree bins of the ball's place ``phi``."""
+    ph = np.mod(d.res_before.phi[d.res_before.idx], 2 * np.pi)
+    ph1 = np.mod(d.res_after.phi[d.res_after.idx], 2 * np.pi)
+    bins = np.linspace(0, 2 * np.pi, 73)
+    fig, axs = plt.subplots(len(rows), 1, figsize=(10, 2.6 * len(rows)), sharex=True,
+                            squeeze=False)
+    for ax, row in zip(axs[:, 0], rows, strict=True):
+        for p, r, name in ((ph, row.nominal, "nominal"), (ph1, row.corrected, "corrected")):
+            k = np.digitize(p, bins) - 1
+            mean = np.array([np.nanmean(r[k == i]) if np.any(k == i) else np.nan
+                             for i in range(72)])
+            ax.plot(np.degrees(0.5 * (bins[1:] + bins[:-1])), mean, label=name)
+        ax.axhline(0, color="0.5", lw=0.5)
+        ax.set_ylabel("mean " + row.label)
+    axs[0, 0].legend(fontsize=8)
+    axs[-1, 0].set_xlabel("ball's place on the frame: contact angle phi mod 360 [deg]")
+    return _save(plt, fig, out, "residual_phi.png")
+
+
+def _plot_overlay(plt: Any, d: Diagnosis, out: Path) -> str:
+    """``overlay.png``: 100 ms predictions, nominal and corrected, over 3 s of measurement.
+
+    The ball's world angle (or, frame only, theta_dot) around the middle prediction; with a
+    fitted camera correction also the corrected measurement the corrected model predicts.
+    """
+    prep = d.prep
+    t0 = prep.t[0]
     key = "ball_angle" if prep.has_ball else "theta_dot"
     fig, ax = plt.subplots(figsize=(10, 3.2))
     ref = prep.psi_w if prep.has_ball else prep.theta_dot
@@ -292,11 +336,11 @@ def _plots(d: Diagnosis, out: Path) -> list[str]:
         ax.legend(uniq.values(), uniq.keys(), fontsize=8)
     ax.set_xlabel("t [s] (held-out block)")
     ax.set_ylabel("ball world angle [rad]" if prep.has_ball else "theta_dot [rad/s]")
-    fig.tight_layout()
-    fig.savefig(out / "overlay.png", dpi=90)
-    plt.close(fig)
-    names.append("overlay.png")
-    # ranking
+    return _save(plt, fig, out, "overlay.png")
+
+
+def _plot_ranking(plt: Any, d: Diagnosis, out: Path) -> str:
+    """``ranking.png``: each effect's held-out gain alone against its null threshold."""
     rk = d.summary["ranking"]
     fig, ax = plt.subplots(figsize=(8, 0.3 * len(rk) + 1.2))
     y = np.arange(len(rk))
@@ -308,11 +352,7 @@ def _plots(d: Diagnosis, out: Path) -> list[str]:
     ax.invert_yaxis()
     ax.set_xlabel("held-out cost reduction, single effect vs nominal (green: selected)")
     ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(out / "ranking.png", dpi=90)
-    plt.close(fig)
-    names.append("ranking.png")
-    return names
+    return _save(plt, fig, out, "ranking.png")
 
 
 def write_outputs(d: Diagnosis, out_dir: Path, plots: bool = True) -> Path:
@@ -327,7 +367,7 @@ def write_outputs(d: Diagnosis, out_dir: Path, plots: bool = True) -> Path:
     try:
         figs = _plots(d, tmp) if plots else []
         (tmp / "report.md").write_text(_markdown(d, figs))
-        (tmp / "diagnosis.json").write_text(json.dumps(d.summary, indent=1, default=str))
+        (tmp / "diagnosis.json").write_text(json.dumps(d.to_json(), indent=1, default=str))
         (tmp / "corrected_params.yaml").write_text(corrected_yaml(d))
         (tmp / "camera_correction.yaml").write_text(camera_yaml(d))
         if out_dir.exists():

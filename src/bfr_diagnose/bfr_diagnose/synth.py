@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from bfr_control.controller import OrbitalController
 from bfr_model.dynamics import RigidModel
+from bfr_model.param_file import integer, nonnegative
 from bfr_model.params import RigParams
 from bfr_model.recording import Recording, ball_centre_angle
 from bfr_sim.closed_loop import LoopResult, SensorConfig, orbit_initial_state, run_closed_loop
@@ -50,10 +51,8 @@ class LogConventions:
     camera_offset: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
-        if self.encoder_counts < 0:
-            raise ValueError("encoder_counts must be >= 0")
-        if not (math.isfinite(self.velocity_lag) and self.velocity_lag >= 0.0):
-            raise ValueError(f"velocity_lag must be >= 0 s, got {self.velocity_lag}")
+        integer("log.encoder_counts", self.encoder_counts, minimum=0)
+        nonnegative("log.velocity_lag", self.velocity_lag)
 
 
 @dataclass(frozen=True, kw_only=True)

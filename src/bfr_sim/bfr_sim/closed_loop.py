@@ -38,10 +38,11 @@ from collections import deque
 from dataclasses import asdict, dataclass, field
 
 import numpy as np
-from bfr_control.controller import BALL_LOST, ROLLING, WAITING, OrbitalController
+from bfr_control.controller import BALL_LOST, ROLLING, WAITING, Command, OrbitalController
 from bfr_control.estimator import BallObservation
 from bfr_control.transverse import transverse_coordinates
 from bfr_model.dynamics import RigidModel, rigid_rk4_steps, rigid_terms
+from bfr_model.param_file import in_range, integer, nonnegative, positive
 from bfr_model.params import RigParams
 from bfr_model.simulate import SimResult
 from numpy.typing import NDArray
@@ -84,16 +85,11 @@ class SensorConfig:
     encoder_rate_noise: float = 0.0
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.camera_rate) and self.camera_rate > 0.0):
-            raise ValueError(f"camera_rate must be > 0 Hz, got {self.camera_rate}")
+        positive("sensors.camera_rate", self.camera_rate)
         for name in ("camera_latency", "camera_noise", "encoder_rate_noise"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"{name} must be >= 0, got {v}")
-        if not 0.0 <= self.camera_dropout <= 1.0:
-            raise ValueError("camera_dropout must be within [0, 1]")
-        if self.encoder_counts < 0:
-            raise ValueError("encoder_counts must be >= 0")
+            nonnegative(f"sensors.{name}", getattr(self, name))
+        in_range("sensors.camera_dropout", self.camera_dropout, 0.0, 1.0)
+        integer("sensors.encoder_counts", self.encoder_counts, minimum=0)
 
 
 @dataclass
@@ -237,6 +233,250 @@ def orbit_initial_state(controller: OrbitalController, phase: float = 0.0, d_the
     return x
 
 
+#: Tolerance of time comparisons on the plant grid [s].
+_EPS = 1e-9
+
+
+# -- the pieces of a run -----------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class _ControlGrid:
+    """The control steps of a run, a whole number of plant steps apart.
+
+    Attributes
+    ----------
+    plant_dt : float
+        Plant RK4 step [s].
+    n_sub : int
+        Plant steps per control period [-].
+    n_steps : int
+        Control steps of the run, both ends included [-].
+    """
+
+    plant_dt: float
+    n_sub: int
+    n_steps: int
+
+    @classmethod
+    def of(cls, duration: float, rate: float, plant_dt: float) -> _ControlGrid:
+        """The grid of ``duration`` [s] at about ``rate`` [Hz] on steps of ``plant_dt`` [s]."""
+        n_sub = max(1, round(1.0 / (rate * plant_dt)))
+        return cls(plant_dt=plant_dt, n_sub=n_sub,
+                   n_steps=round(duration / (n_sub * plant_dt)) + 1)
+
+    @property
+    def period(self) -> float:
+        """Control period [s]."""
+        return self.n_sub * self.plant_dt
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Encoder:
+    """The frame encoder as the controller reads it.
+
+    Attributes
+    ----------
+    quantum : float
+        Angle of one count [rad] (0: exact theta).
+    rate_noise : float
+        Standard deviation of the theta_dot noise [rad/s].
+    rng : numpy.random.Generator
+        The run's noise source.
+    """
+
+    quantum: float
+    rate_noise: float
+    rng: np.random.Generator
+
+    @classmethod
+    def of(cls, sensors: SensorConfig, rng: np.random.Generator) -> _Encoder:
+        """The encoder of ``sensors``."""
+        counts = sensors.encoder_counts
+        return cls(quantum=2.0 * math.pi / counts if counts else 0.0,
+                   rate_noise=sensors.encoder_rate_noise, rng=rng)
+
+    def read(self, x: FloatArray) -> tuple[float, float]:
+        """Measured ``(theta, theta_dot)`` of the true state ``x`` (draws the rate noise)."""
+        q = self.quantum
+        theta = x[0] if not q else q * math.floor(x[0] / q)
+        theta_dot = x[2] if not self.rate_noise else (
+            x[2] + self.rate_noise * self.rng.standard_normal())
+        return theta, theta_dot
+
+
+class _Camera:
+    """The camera: exposures on the plant grid, noise, dropouts, blackouts, latency.
+
+    A frame exposed at ``tp`` is delivered at ``tp + camera_latency`` with the exposure's time
+    stamp; every frame is also recorded (``t``, ``x``, ``y``, ``valid``) for the result.
+
+    Parameters
+    ----------
+    sensors : SensorConfig
+        Rate, latency, noise, dropout and blackouts.
+    plant : RigidModel
+        The plant (the true ball position).
+    rng : numpy.random.Generator
+        The run's noise source.
+    """
+
+    def __init__(self, sensors: SensorConfig, plant: RigidModel,
+                 rng: np.random.Generator) -> None:
+        self.period = 1.0 / sensors.camera_rate
+        self.latency = sensors.camera_latency
+        self.noise = sensors.camera_noise
+        self.dropout = sensors.camera_dropout
+        self.blackouts = tuple(sensors.camera_blackouts)
+        self.plant = plant
+        self.rng = rng
+        self.pending: deque[tuple[float, BallObservation]] = deque()
+        self.next_exposure = 0.0
+        self.t: list[float] = []
+        self.x: list[float] = []
+        self.y: list[float] = []
+        self.valid: list[bool] = []
+
+    def delivered(self, t: float) -> list[BallObservation]:
+        """The frames delivered by time ``t`` [s] and not yet handed out, oldest first."""
+        obs = []
+        while self.pending and self.pending[0][0] <= t + _EPS:
+            obs.append(self.pending.popleft()[1])
+        return obs
+
+    def expose_if_due(self, tp: float, x: FloatArray) -> None:
+        """Take a frame of state ``x`` at plant time ``tp`` [s] if an exposure is due."""
+        if tp < self.next_exposure - _EPS:
+            return
+        valid = self.rng.random() >= self.dropout
+        if valid and self.blackouts:
+            valid = not any(a <= tp < b for a, b in self.blackouts)
+        if valid:
+            bx, by = self.plant.ball_position(x[:4]).tolist()
+            bx += self.noise * self.rng.standard_normal()
+            by += self.noise * self.rng.standard_normal()
+        else:
+            bx = by = 0.0
+        self.pending.append((tp + self.latency, BallObservation(tp, bx, by, valid)))
+        self.t.append(tp)
+        self.x.append(bx)
+        self.y.append(by)
+        self.valid.append(valid)
+        self.next_exposure += self.period
+
+    def steps_to_exposure(self, tp: float, plant_dt: float) -> int:
+        """Plant steps of ``plant_dt`` [s] from ``tp`` [s] to the next exposure."""
+        return math.ceil((self.next_exposure - _EPS - tp) / plant_dt)
+
+
+class _Trace:
+    """What is recorded at each control step (preallocated for ``n`` steps)."""
+
+    def __init__(self, n: int) -> None:
+        self.t = np.empty(n)
+        self.x = np.empty((n, 6))
+        self.u = np.zeros(n)
+        self.u_unsat = np.zeros(n)
+        self.mode = np.zeros(n, np.int8)
+        self.phi_hat = np.full(n, np.nan)
+        self.phi_dot_hat = np.full(n, np.nan)
+
+    def record(self, k: int, t: float, x: FloatArray, cmd: Command) -> None:
+        """Store step ``k``: time, true state and the controller's command."""
+        self.t[k] = t
+        self.x[k] = x
+        self.u[k] = cmd.torque
+        self.u_unsat[k] = cmd.torque_unsat
+        self.mode[k] = MODE_CODES[cmd.mode]
+        self.phi_hat[k] = cmd.phi
+        self.phi_dot_hat[k] = cmd.phi_dot
+
+
+@dataclass(frozen=True, kw_only=True)
+class _LoopEnd:
+    """How the control loop ended.
+
+    Attributes
+    ----------
+    steps : int
+        Control steps recorded [-].
+    plant_steps : int
+        RK4 steps of the plant [-].
+    lost_reason : str
+        The controller's first BALL_LOST reason, or why the run stopped (empty if neither).
+    """
+
+    steps: int
+    plant_steps: int
+    lost_reason: str
+
+
+def _ball_failed(x: FloatArray, cmd: Command, pargs: tuple) -> bool:
+    """The ball stopped, turned back, lifted off, or the controller declared it lost."""
+    return bool(x[3] <= 0.0 or cmd.mode == BALL_LOST
+                or rigid_terms(x[0], x[1], x[2], x[3], cmd.torque, *pargs)[4] <= 0.0)
+
+
+def _plant_period(x: FloatArray, t: float, u: float, grid: _ControlGrid, camera: _Camera,
+                  pargs: tuple) -> tuple[FloatArray, int]:
+    """The plant over one control period from ``t`` [s] with the torque ``u`` [N m] held.
+
+    The RK4 runs in stretches that end at the camera's exposures, which are taken on the
+    plant grid. Returns the state at the period's end and the RK4 steps taken.
+    """
+    j = 0
+    while j < grid.n_sub:
+        tp = t + j * grid.plant_dt
+        camera.expose_if_due(tp, x)
+        m = max(1, min(grid.n_sub - j, camera.steps_to_exposure(tp, grid.plant_dt)))
+        x = rigid_rk4_steps(x, tp, grid.plant_dt, m, (u, *pargs))
+        j += m
+    return x, j
+
+
+def _control_loop(controller: OrbitalController, x: FloatArray, grid: _ControlGrid,
+                  camera: _Camera, encoder: _Encoder, trace: _Trace, pargs: tuple,
+                  stop_on_failure: bool) -> _LoopEnd:
+    """Run the control steps of ``grid`` from the true state ``x``, recording into ``trace``.
+
+    Each step hands the controller the encoder reading and the camera frames delivered by
+    then, records its command, and (but after the last) advances the plant one period.
+    """
+    lost_reason = ""
+    plant_steps = 0
+    for k in range(grid.n_steps):
+        t = k * grid.period
+        obs = camera.delivered(t)
+        theta_m, theta_dot_m = encoder.read(x)
+        cmd = controller.step(t, theta_m, theta_dot_m, obs or None)
+        trace.record(k, t, x, cmd)
+        if cmd.mode == BALL_LOST and not lost_reason:
+            lost_reason = cmd.reason
+        if stop_on_failure and _ball_failed(x, cmd, pargs):
+            return _LoopEnd(steps=k + 1, plant_steps=plant_steps, lost_reason=lost_reason)
+        if k == grid.n_steps - 1:
+            break
+        x, m = _plant_period(x, t, cmd.torque, grid, camera, pargs)
+        plant_steps += m
+        if not all(math.isfinite(v) for v in x[:4]):
+            return _LoopEnd(steps=k + 1, plant_steps=plant_steps,
+                            lost_reason=lost_reason or "plant state became non-finite")
+    return _LoopEnd(steps=grid.n_steps, plant_steps=plant_steps, lost_reason=lost_reason)
+
+
+def _loop_result(controller: OrbitalController, trace: _Trace, camera: _Camera,
+                 end: _LoopEnd, pargs: tuple, wall_time: float, info: dict) -> LoopResult:
+    """The :class:`LoopResult` of the first ``end.steps`` recorded steps."""
+    sl = slice(0, end.steps)
+    xs = trace.x[sl]
+    fn = rigid_terms(xs[:, 0], xs[:, 1], xs[:, 2], xs[:, 3], trace.u[sl], *pargs)[4]
+    return LoopResult(t=trace.t[sl], x=xs, u=trace.u[sl], u_unsat=trace.u_unsat[sl],
+                      mode=trace.mode[sl], phi_hat=trace.phi_hat[sl],
+                      phi_dot_hat=trace.phi_dot_hat[sl],
+                      transverse=transverse_coordinates(controller.orbit, xs[:, :4]),
+                      normal_force=fn, cam_t=np.array(camera.t), cam_x=np.array(camera.x),
+                      cam_y=np.array(camera.y), cam_valid=np.array(camera.valid, bool),
+                      wall_time=wall_time, info=info)
+
+
 def run_closed_loop(controller: OrbitalController, plant_params: RigParams, duration: float,
                     x0: FloatArray | None = None, sensors: SensorConfig | None = None,
                     seed: int = 0, plant_dt: float = 1e-3, control_rate: float | None = None,
@@ -268,115 +508,28 @@ def run_closed_loop(controller: OrbitalController, plant_params: RigParams, dura
     sensors = sensors or SensorConfig()
     if not (math.isfinite(duration) and duration > 0.0):
         raise ValueError(f"duration must be > 0 s, got {duration}")
-    rate = float(control_rate or controller.config.control.rate)
-    n_sub = max(1, round(1.0 / (rate * plant_dt)))
-    Tc = n_sub * plant_dt
-    n_ctrl = round(duration / Tc) + 1
+    grid = _ControlGrid.of(duration, float(control_rate or controller.config.control.rate),
+                           plant_dt)
     rng = np.random.default_rng(seed)
     plant = RigidModel(plant_params)
-    pargs = plant.kernel_args
     x = np.zeros(6)
     x[:4] = controller.orbit.state(0.0) if x0 is None else np.asarray(x0, float)
     controller.reset()
-    limit = controller.torque_limit
-    cam_dt = 1.0 / sensors.camera_rate
-    lat = sensors.camera_latency
-    sigma = sensors.camera_noise
-    counts = sensors.encoder_counts
-    q_enc = 2.0 * math.pi / counts if counts else 0.0
-    blackouts = tuple(sensors.camera_blackouts)
-    pending: deque = deque()
-    next_cam = 0.0
-    eps = 1e-9
-    T = np.empty(n_ctrl)
-    X = np.empty((n_ctrl, 6))
-    U = np.zeros(n_ctrl)
-    UU = np.zeros(n_ctrl)
-    MODE = np.zeros(n_ctrl, np.int8)
-    PH = np.full(n_ctrl, np.nan)
-    PD = np.full(n_ctrl, np.nan)
-    cam_t: list[float] = []
-    cam_x: list[float] = []
-    cam_y: list[float] = []
-    cam_v: list[bool] = []
-    lost_reason = ""
+    camera = _Camera(sensors, plant, rng)
+    trace = _Trace(grid.n_steps)
     start = time.perf_counter()
-    n_done = n_ctrl
-    plant_steps = 0
-    for k in range(n_ctrl):
-        t = k * Tc
-        obs = []
-        while pending and pending[0][0] <= t + eps:
-            obs.append(pending.popleft()[1])
-        theta_m = x[0] if not q_enc else q_enc * math.floor(x[0] / q_enc)
-        thd_m = x[2] if not sensors.encoder_rate_noise else (
-            x[2] + sensors.encoder_rate_noise * rng.standard_normal())
-        cmd = controller.step(t, theta_m, thd_m, obs or None)
-        u = cmd.torque
-        T[k] = t
-        X[k] = x
-        U[k] = u
-        UU[k] = cmd.torque_unsat
-        MODE[k] = MODE_CODES[cmd.mode]
-        PH[k] = cmd.phi
-        PD[k] = cmd.phi_dot
-        if cmd.mode == BALL_LOST and not lost_reason:
-            lost_reason = cmd.reason
-        if stop_on_failure and (x[3] <= 0.0 or cmd.mode == BALL_LOST
-                                or rigid_terms(x[0], x[1], x[2], x[3], u, *pargs)[4] <= 0.0):
-            n_done = k + 1
-            break
-        if k == n_ctrl - 1:
-            break
-        # plant over one control period; camera exposures on the plant grid
-        j = 0
-        while j < n_sub:
-            tp = t + j * plant_dt
-            if tp >= next_cam - eps:
-                valid = rng.random() >= sensors.camera_dropout
-                if valid and blackouts:
-                    valid = not any(a <= tp < b for a, b in blackouts)
-                if valid:
-                    bx, by = plant.ball_position(x[:4]).tolist()
-                    bx += sigma * rng.standard_normal()
-                    by += sigma * rng.standard_normal()
-                else:
-                    bx = by = 0.0
-                pending.append((tp + lat, BallObservation(tp, bx, by, valid)))
-                cam_t.append(tp)
-                cam_x.append(bx)
-                cam_y.append(by)
-                cam_v.append(valid)
-                next_cam += cam_dt
-            # steps until the next exposure or the end of the control period
-            n_free = n_sub - j
-            to_cam = math.ceil((next_cam - eps - tp) / plant_dt)
-            m = max(1, min(n_free, to_cam))
-            x = rigid_rk4_steps(x, tp, plant_dt, m, (u, *pargs))
-            plant_steps += m
-            j += m
-        if not (math.isfinite(x[0]) and math.isfinite(x[1]) and math.isfinite(x[2])
-                and math.isfinite(x[3])):
-            n_done = k + 1
-            lost_reason = lost_reason or "plant state became non-finite"
-            break
+    end = _control_loop(controller, x, grid, camera, _Encoder.of(sensors, rng), trace,
+                        plant.kernel_args, stop_on_failure)
     wall = time.perf_counter() - start
-    sl = slice(0, n_done)
-    tr = transverse_coordinates(controller.orbit, X[sl, :4])
-    Xs = X[sl]
-    FN = rigid_terms(Xs[:, 0], Xs[:, 1], Xs[:, 2], Xs[:, 3], U[sl], *pargs)[4]
     info = {
         "seed": seed,
         "plant_dt": plant_dt,
-        "control_rate": 1.0 / Tc,
-        "torque_limit": limit,
-        "plant_steps": plant_steps,
+        "control_rate": 1.0 / grid.period,
+        "torque_limit": controller.torque_limit,
+        "plant_steps": end.plant_steps,
         "sensors": {k: (list(v) if isinstance(v, tuple) else v)
                     for k, v in asdict(sensors).items()},
-        "x0": [float(v) for v in X[0, :4]],
-        "lost_reason": lost_reason,
+        "x0": [float(v) for v in trace.x[0, :4]],
+        "lost_reason": end.lost_reason,
     }
-    return LoopResult(t=T[sl], x=X[sl], u=U[sl], u_unsat=UU[sl], mode=MODE[sl], phi_hat=PH[sl],
-                      phi_dot_hat=PD[sl], transverse=tr, normal_force=FN,
-                      cam_t=np.array(cam_t), cam_x=np.array(cam_x), cam_y=np.array(cam_y),
-                      cam_valid=np.array(cam_v, bool), wall_time=wall, info=info)
+    return _loop_result(controller, trace, camera, end, plant.kernel_args, wall, info)

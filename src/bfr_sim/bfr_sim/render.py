@@ -51,6 +51,7 @@ import cv2
 import numpy as np
 from bfr_camera.calibration import CameraModel
 from bfr_model.geometry import OffsetCurve
+from bfr_model.param_file import check, finite, in_range, nonnegative, one_of
 from bfr_model.params import load_params
 from numpy.typing import ArrayLike, NDArray
 
@@ -103,13 +104,11 @@ class Lighting:
     vignetting: float = 0.0
 
     def __post_init__(self) -> None:
-        if not 0.0 <= self.ambient <= 1.0:
-            raise ValueError(f"lighting.ambient must be in [0, 1], got {self.ambient}")
+        in_range("lighting.ambient", self.ambient, 0.0, 1.0)
         d = np.asarray(self.direction, dtype=float)
-        if d.shape != (3,) or not np.all(np.isfinite(d)) or np.linalg.norm(d) == 0:
-            raise ValueError(f"lighting.direction must be a non-zero 3-vector, got {d}")
-        if not 0.0 <= self.vignetting < 1.0:
-            raise ValueError(f"lighting.vignetting must be in [0, 1), got {self.vignetting}")
+        check(d.shape == (3,) and bool(np.all(np.isfinite(d))) and np.linalg.norm(d) != 0,
+              "lighting.direction", f"must be a non-zero finite 3-vector, got {d}")
+        in_range("lighting.vignetting", self.vignetting, 0.0, 1.0, high_open=True)
 
     @property
     def unit_direction(self) -> FloatArray:
@@ -140,8 +139,9 @@ class Occluder:
 
     def __post_init__(self) -> None:
         p = np.asarray(self.polygon, dtype=float)
-        if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3 or not np.all(np.isfinite(p)):
-            raise ValueError("occluder polygon must be >= 3 finite (u, v) vertices")
+        check(p.ndim == 2 and p.shape[1] == 2 and p.shape[0] >= 3
+              and bool(np.all(np.isfinite(p))), "occluder.polygon",
+              "must be >= 3 finite (u, v) vertices")
         object.__setattr__(self, "polygon", tuple(tuple(map(float, v)) for v in p))
 
     @classmethod
@@ -201,19 +201,13 @@ class RenderOptions:
 
     def __post_init__(self) -> None:
         for name in ("background", "frame_level", "ball_level"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and 0.0 <= v <= 255.0):
-                raise ValueError(f"{name} must be a level in [0, 255] DN, got {v!r}")
+            in_range(f"render.{name}", getattr(self, name), 0.0, 255.0)  # a level [DN]
         for name in ("noise_sigma", "shot_noise", "defocus_sigma"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v >= 0.0):
-                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
-        if self.exposure_time is not None and not (0.0 <= self.exposure_time < 1.0):
-            raise ValueError(f"exposure_time must be in [0, 1) s, got {self.exposure_time}")
-        if not math.isfinite(self.plate_z):
-            raise ValueError("plate_z must be finite")
-        if self.encoding not in ENCODINGS:
-            raise ValueError(f"encoding must be one of {ENCODINGS}, got {self.encoding!r}")
+            nonnegative(f"render.{name}", getattr(self, name))
+        if self.exposure_time is not None:
+            in_range("render.exposure_time", self.exposure_time, 0.0, 1.0, high_open=True)
+        finite("render.plate_z", self.plate_z)
+        one_of("render.encoding", self.encoding, ENCODINGS)
         object.__setattr__(self, "occluders", tuple(self.occluders))
 
 

@@ -54,7 +54,7 @@ import numpy as np
 from bfr_camera.calibration import CameraModel, camera_from_dict, default_camera_path
 from bfr_model.dynamics import RigidModel, curve_terms
 from bfr_model.layout import I_CW, I_SW
-from bfr_model.param_file import config_path
+from bfr_model.param_file import check, config_path, nonnegative, one_of, positive
 from bfr_model.params import RigParams, default_params_path, params_from_dict
 from bfr_ros.node_common import (
     CLOCK_QOS,
@@ -125,13 +125,12 @@ class RigSimulation:
 
     def __init__(self, params: RigParams, x0: Any, time_step: float = 1e-3,
                  command_timeout: float = 0.1) -> None:
-        if not (math.isfinite(time_step) and 0.0 < time_step <= 0.01):
-            raise ValueError(f"sim.time_step must be in (0, 0.01] s, got {time_step}")
-        if not (math.isfinite(command_timeout) and command_timeout > 0.0):
-            raise ValueError(f"command.timeout must be > 0 s, got {command_timeout}")
+        positive("sim.time_step", time_step)
+        check(time_step <= 0.01, "sim.time_step", f"must be <= 0.01 s, got {time_step!r}")
+        positive("command.timeout", command_timeout)
         x0 = np.asarray(x0, dtype=float)
-        if x0.shape != (4,) or not np.all(np.isfinite(x0)):
-            raise ValueError(f"initial state must be 4 finite numbers, got {x0}")
+        check(x0.shape == (4,) and bool(np.all(np.isfinite(x0))), "initial",
+              f"the initial state must be 4 finite numbers, got {x0}")
         self.params = params
         self.model = RigidModel(params)
         self.x = np.zeros(6)
@@ -245,8 +244,7 @@ class Schedule:
     """Publication instants on the simulation's step grid, in integer nanoseconds."""
 
     def __init__(self, rate: float, step_ns: int, name: str) -> None:
-        if not (math.isfinite(rate) and rate > 0.0):
-            raise ValueError(f"{name} must be > 0 Hz, got {rate}")
+        positive(name, rate)
         self.rate = rate
         self.half = step_ns // 2
         self.n = 0
@@ -275,11 +273,9 @@ class SimulatorNode(Node):
         self.camera: CameraModel = camera_from_dict(p["camera"])
         s = p["sim"]
         self.mode = str(s["mode"]).lower()
-        if self.mode not in ("realtime", "lockstep"):
-            raise ValueError(f"sim.mode must be 'realtime' or 'lockstep', got {s['mode']!r}")
+        one_of("sim.mode", self.mode, ("realtime", "lockstep"))
         self.rtf = float(s["real_time_factor"])
-        if not (math.isfinite(self.rtf) and self.rtf > 0):
-            raise ValueError(f"sim.real_time_factor must be > 0, got {self.rtf}")
+        positive("sim.real_time_factor", self.rtf)
         self.duration_ns = round(max(float(s["duration"]), 0.0) * _NS)
         ini = p["initial"]
         x0 = [ini["theta"], ini["phi"], ini["theta_dot"], ini["phi_dot"]]
@@ -294,8 +290,7 @@ class SimulatorNode(Node):
         self.pub_images = bool(r["publish"])
         self.frame_sched = Schedule(self.camera.frame_rate, step_ns, "camera.frame_rate")
         latency = float(r["latency"])
-        if not (math.isfinite(latency) and latency >= 0):
-            raise ValueError(f"render.latency must be >= 0 s, got {latency}")
+        nonnegative("render.latency", latency)
         self.latency_ns = math.ceil(round(latency * _NS) / step_ns) * step_ns
         self.scene = rig_scene(self.rig_params)
         self.renderer = FrameRenderer(

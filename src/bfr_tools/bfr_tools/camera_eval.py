@@ -22,8 +22,8 @@ ball_free
 
 The ROI timing gives the detector the ball's position one camera frame earlier as the last
 fix (what tracking sees); the full-frame timing gives it none. Times are wall-clock medians on
-this machine, single-threaded. ``bfr_camera`` sits below ``bfr_sim`` in the dependency order;
-this tool (run from the ``bfr`` CLI at the top) imports the renderer only when it runs.
+this machine, single-threaded. It joins the renderer (``bfr_sim.render``) and the detector
+(``bfr_camera.detector``), so it lives with the tools.
 """
 
 from __future__ import annotations
@@ -33,17 +33,31 @@ import json
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from pathlib import Path
 from typing import Any
 
 import cv2
 import numpy as np
 from bfr_camera.calibration import CameraModel, load_camera
-from bfr_camera.detector import BallDetector, Detection, DetectionStatus, load_detector_config
+from bfr_camera.detector import (
+    BallDetector,
+    Detection,
+    DetectionStatus,
+    DetectorConfig,
+    load_detector_config,
+)
 from bfr_model.params import load_params
-from bfr_sim.render import FrameRenderer, Lighting, Occluder, RenderOptions, rig_scene
+from bfr_sim.render import (
+    FrameRenderer,
+    Lighting,
+    Occluder,
+    RenderOptions,
+    RigScene,
+    rig_scene,
+)
 
 __all__ = ["TARGETS", "evaluate", "format_table", "main"]
 
@@ -106,6 +120,165 @@ def _bar_occluder(centre_px: np.ndarray, radius_px: float, outward: np.ndarray,
     return Occluder(tuple(map(tuple, pts)), level)
 
 
+@dataclass(frozen=True, kw_only=True)
+class _Setup:
+    """What every condition of a run shares.
+
+    Attributes
+    ----------
+    camera : CameraModel
+        The camera.
+    scene : RigScene
+        The rig's frame outline and ball kinematics.
+    detector_config : DetectorConfig
+        The detector's parameters.
+    repeat : int
+        Timed runs per render and detection (the fastest kept).
+    out_dir : Path or None
+        Where example frames go.
+    """
+
+    camera: CameraModel
+    scene: RigScene
+    detector_config: DetectorConfig
+    repeat: int
+    out_dir: Path | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Frame:
+    """One drawn frame of a condition: the rig's state and what is rendered of it.
+
+    Attributes
+    ----------
+    theta, phi, theta_dot, phi_dot : float
+        Frame and contact angle [rad] and their rates [rad/s].
+    options : RenderOptions
+        How it is rendered.
+    centre, velocity : ndarray
+        The ball centre [m] and its velocity [m/s] in the world frame.
+    truth_px : ndarray
+        The ball centre's image [px].
+    occluders : tuple of Occluder
+        Extra occluders of this frame.
+    """
+
+    theta: float
+    phi: float
+    theta_dot: float
+    phi_dot: float
+    options: RenderOptions
+    centre: np.ndarray
+    velocity: np.ndarray
+    truth_px: np.ndarray
+    occluders: tuple[Occluder, ...]
+
+
+def _draw_frame(name: str, setup: _Setup, rng: np.random.Generator) -> _Frame:
+    """Draw the next frame of condition ``name`` (the order of the draws is the seed's)."""
+    cam, scene = setup.camera, setup.scene
+    theta = float(rng.uniform(-math.pi, math.pi))
+    phi = float(rng.uniform(-math.pi, math.pi))
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    theta_dot = sign * float(rng.uniform(1.5, 3.5))
+    phi_dot = theta_dot * float(rng.uniform(0.7, 1.3))
+    opts: RenderOptions = _options(name, scene.plate_z, rng)
+    centre = scene.ball_centre(theta, phi)
+    truth_px = cam.project(centre)
+    occ: tuple[Occluder, ...] = ()
+    if name == "occluded":
+        outward = truth_px - cam.project(np.zeros(3))
+        r_px = scene.ball_radius * cam.pixels_per_metre(centre)
+        occ = (_bar_occluder(truth_px, r_px, outward, rng, float(rng.uniform(10, 90))),)
+    return _Frame(theta=theta, phi=phi, theta_dot=theta_dot, phi_dot=phi_dot, options=opts,
+                  centre=centre, velocity=scene.ball_velocity(theta, phi, theta_dot, phi_dot),
+                  truth_px=truth_px, occluders=occ)
+
+
+def _render_timed(rend: FrameRenderer, frame: _Frame, ball: np.ndarray | None, r_b: float,
+                  rng: np.random.Generator, scratch: np.random.Generator, repeat: int
+                  ) -> tuple[np.ndarray, float]:
+    """Render ``frame`` (noise from ``rng``) and its best time of ``repeat`` runs [s].
+
+    The repeated runs draw their noise from ``scratch``, so the image and ``rng`` do not
+    depend on ``repeat``.
+    """
+    def render(noise: np.random.Generator) -> np.ndarray:
+        return rend.render(frame.theta, ball, r_b, rng=noise, theta_dot=frame.theta_dot,
+                           ball_velocity=frame.velocity, occluders=frame.occluders)
+
+    t0 = time.perf_counter()
+    img = render(rng)
+    best = time.perf_counter() - t0
+    for _ in range(repeat - 1):  # the same work again (scratch noise), for timing
+        t0 = time.perf_counter()
+        render(scratch)
+        best = min(best, time.perf_counter() - t0)
+    return img, best
+
+
+def _detect_timed(detect: Callable[[], Detection], repeat: int) -> tuple[Detection, float]:
+    """The first of ``repeat`` detections and the best processing time of them [s]."""
+    first = detect()
+    best = first.processing_time
+    for _ in range(repeat - 1):
+        best = min(best, detect().processing_time)
+    return first, best
+
+
+def _tally(st: _Stats, frame: _Frame, with_ball: bool, d_full: Detection,
+           d_roi: Detection) -> None:
+    """Count a frame's full-frame result (error to the truth), or a false detection."""
+    found = (DetectionStatus.FOUND, DetectionStatus.AMBIGUOUS)
+    if with_ball:
+        if d_full.valid:
+            st.found += 1
+            st.errors_px.append(float(np.hypot(d_full.u - frame.truth_px[0],
+                                               d_full.v - frame.truth_px[1])))
+            st.errors_mm.append(1e3 * float(np.hypot(d_full.x - frame.centre[0],
+                                                     d_full.y - frame.centre[1])))
+    else:
+        st.false_full += int(d_full.status in found)
+        st.false_roi += int(d_roi.status in found)
+
+
+def _run_condition(name: str, ci: int, frames: int, seed: int, setup: _Setup) -> _Stats:
+    """Render, detect and score ``frames`` frames of condition ``name`` (the ``ci``-th)."""
+    cam, scene, r_b, repeat = setup.camera, setup.scene, setup.scene.ball_radius, setup.repeat
+    dt = 1.0 / cam.frame_rate
+    rng = np.random.default_rng(np.random.SeedSequence([seed, ci]))
+    scratch = np.random.default_rng(np.random.SeedSequence([seed, ci, 1]))
+    det = BallDetector(cam, r_b, setup.detector_config)
+    st = _Stats()
+    renderers: dict[int, FrameRenderer] = {}
+    with_ball = name != "ball_free"
+    for k in range(frames):
+        frame = _draw_frame(name, setup, rng)
+        key = hash(frame.options)
+        if key not in renderers:
+            renderers[key] = FrameRenderer(cam, scene.outline, frame.options)
+            renderers[key].render(0.0, None, rng=np.random.default_rng(0))  # warm-up
+        img, render_s = _render_timed(renderers[key], frame, frame.centre if with_ball else None,
+                                      r_b, rng, scratch, repeat)
+        st.render_s.append(render_s)
+        st.frames += 1
+        # tracking: last fix = the ball one frame earlier; a fresh search: no fix
+        prev = cam.project(scene.ball_centre(frame.theta - frame.theta_dot * dt,
+                                             frame.phi - frame.phi_dot * dt))
+        hint = (float(prev[0]), float(prev[1]))
+        d_roi, roi_s = _detect_timed(partial(det.detect, img, frame.theta, hint=hint), repeat)
+        st.roi_s.append(roi_s)
+        det.reset()
+        d_full, full_s = _detect_timed(partial(det.detect, img, frame.theta, use_roi=False),
+                                       repeat)
+        st.full_s.append(full_s)
+        _tally(st, frame, with_ball, d_full, d_roi)
+        if setup.out_dir is not None and k == 0:
+            _save_example(setup.out_dir, name, img, d_full,
+                          frame.truth_px if with_ball else None)
+    return st
+
+
 def evaluate(frames: int = 200, seed: int = 0, camera: CameraModel | None = None,
              params_path: str | None = None, camera_path: str | None = None,
              out_dir: Path | None = None, conditions: Sequence[str] = CONDITIONS,
@@ -132,16 +305,16 @@ def evaluate(frames: int = 200, seed: int = 0, camera: CameraModel | None = None
         machine then inflate the figures less. Results do not depend on it.
     """
     cam = camera if camera is not None else load_camera(camera_path)
-    scene = rig_scene(load_params(params_path))
-    det_cfg = load_detector_config(camera_path)
-    r_b = scene.ball_radius
-    dt = 1.0 / cam.frame_rate
+    setup = _Setup(camera=cam, scene=rig_scene(load_params(params_path)),
+                   detector_config=load_detector_config(camera_path), repeat=repeat,
+                   out_dir=out_dir)
     results: dict[str, Any] = {
         "frames_per_condition": frames, "seed": seed,
         "camera": {"width": cam.width, "height": cam.height, "fx": cam.fx, "fy": cam.fy,
                    "distance_m": float(np.linalg.norm(cam.c)),
                    "exposure_time_s": cam.exposure_time, "frame_rate_hz": cam.frame_rate},
-        "ball_radius_m": r_b, "timing": f"median over frames of the best of {repeat} runs",
+        "ball_radius_m": setup.scene.ball_radius,
+        "timing": f"median over frames of the best of {repeat} runs",
         "conditions": {},
     }
     if out_dir is not None:
@@ -149,73 +322,8 @@ def evaluate(frames: int = 200, seed: int = 0, camera: CameraModel | None = None
     for ci, name in enumerate(conditions):
         if name not in CONDITIONS:
             raise ValueError(f"unknown condition {name!r} (known: {CONDITIONS})")
-        rng = np.random.default_rng(np.random.SeedSequence([seed, ci]))
-        scratch = np.random.default_rng(np.random.SeedSequence([seed, ci, 1]))
-        det = BallDetector(cam, r_b, det_cfg)
-        st = _Stats()
-        renderers: dict[int, Any] = {}
-        for k in range(frames):
-            theta = float(rng.uniform(-math.pi, math.pi))
-            phi = float(rng.uniform(-math.pi, math.pi))
-            sign = 1.0 if rng.random() < 0.5 else -1.0
-            theta_dot = sign * float(rng.uniform(1.5, 3.5))
-            phi_dot = theta_dot * float(rng.uniform(0.7, 1.3))
-            opts: RenderOptions = _options(name, scene.plate_z, rng)
-            centre = scene.ball_centre(theta, phi)
-            vel = scene.ball_velocity(theta, phi, theta_dot, phi_dot)
-            truth_px = cam.project(centre)
-            r_px = r_b * cam.pixels_per_metre(centre)
-            occ: tuple[Any, ...] = ()
-            if name == "occluded":
-                outward = truth_px - cam.project(np.zeros(3))
-                occ = (_bar_occluder(truth_px, r_px, outward, rng, float(rng.uniform(10, 90))),)
-            key = hash(opts)
-            if key not in renderers:
-                renderers[key] = FrameRenderer(cam, scene.outline, opts)
-                renderers[key].render(0.0, None, rng=np.random.default_rng(0))  # warm-up
-            rend = renderers[key]
-            with_ball = name != "ball_free"
-            ball = centre if with_ball else None
-            t0 = time.perf_counter()
-            img = rend.render(theta, ball, r_b, rng=rng, theta_dot=theta_dot,
-                              ball_velocity=vel, occluders=occ)
-            best = time.perf_counter() - t0
-            for _ in range(repeat - 1):  # the same work again (scratch noise), for timing
-                t0 = time.perf_counter()
-                rend.render(theta, ball, r_b, rng=scratch, theta_dot=theta_dot,
-                            ball_velocity=vel, occluders=occ)
-                best = min(best, time.perf_counter() - t0)
-            st.render_s.append(best)
-            st.frames += 1
-            # tracking: last fix = the ball one frame earlier; a fresh search: no fix
-            prev = cam.project(scene.ball_centre(theta - theta_dot * dt, phi - phi_dot * dt))
-            hint = (float(prev[0]), float(prev[1]))
-            d_roi = det.detect(img, theta, hint=hint)
-            best = d_roi.processing_time
-            for _ in range(repeat - 1):
-                best = min(best, det.detect(img, theta, hint=hint).processing_time)
-            st.roi_s.append(best)
-            det.reset()
-            d_full = det.detect(img, theta, use_roi=False)
-            best = d_full.processing_time
-            for _ in range(repeat - 1):
-                best = min(best, det.detect(img, theta, use_roi=False).processing_time)
-            st.full_s.append(best)
-            if with_ball:
-                if d_full.valid:
-                    st.found += 1
-                    st.errors_px.append(float(np.hypot(d_full.u - truth_px[0],
-                                                       d_full.v - truth_px[1])))
-                    st.errors_mm.append(1e3 * float(np.hypot(d_full.x - centre[0],
-                                                             d_full.y - centre[1])))
-            else:
-                st.false_full += int(d_full.status in (DetectionStatus.FOUND,
-                                                       DetectionStatus.AMBIGUOUS))
-                st.false_roi += int(d_roi.status in (DetectionStatus.FOUND,
-                                                     DetectionStatus.AMBIGUOUS))
-            if out_dir is not None and k == 0:
-                _save_example(out_dir, name, img, d_full, truth_px if with_ball else None)
-        results["conditions"][name] = _summarise(name, st)
+        results["conditions"][name] = _summarise(name, _run_condition(name, ci, frames, seed,
+                                                                      setup))
     results["rows"] = _rows(results["conditions"])
     results["all_targets_met"] = all(r["met"] for r in results["rows"] if r["met"] is not None)
     return results

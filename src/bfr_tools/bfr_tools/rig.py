@@ -204,6 +204,177 @@ def _wall_stats(log_path: Path | None) -> tuple[float, float] | None:
 
 
 # -- the bag's summary -------------------------------------------------------------------------
+#: ``ControllerState.mode`` codes.
+_MODE_NAMES = {0: "WAITING", 1: "ROLLING", 2: "BALL_LOST", 3: "FAULT"}
+_ROLLING = 1
+
+
+def _stamps(msgs: list[Any]) -> np.ndarray:
+    """Header stamps of messages [s]."""
+    return np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in msgs])
+
+
+def _rate(t: np.ndarray) -> float:
+    """Mean rate of sorted stamps ``t`` [s] over their own span [Hz] (0 for fewer than two)."""
+    return float((t.size - 1) / (t[-1] - t[0])) if t.size > 1 and t[-1] > t[0] else 0.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class _BagRun:
+    """The decoded messages of a rig run that its summary reads (stamps in [s]).
+
+    Attributes
+    ----------
+    truth, truth_t : list, ndarray
+        ``SimTruth`` messages and their stamps.
+    states, state_t : list, ndarray
+        ``ControllerState`` messages and their stamps.
+    mode : ndarray of int
+        The controller's mode code per state message.
+    obs, obs_t : list, ndarray
+        ``BallObservation`` messages and their (exposure) stamps.
+    t0, t1 : float
+        First and last instant of the run (joint_states, truth, controller states; NaN if
+        none of them was recorded).
+    """
+
+    truth: list[Any]
+    truth_t: np.ndarray
+    states: list[Any]
+    state_t: np.ndarray
+    mode: np.ndarray
+    obs: list[Any]
+    obs_t: np.ndarray
+    t0: float
+    t1: float
+
+    @classmethod
+    def decode(cls, by_topic: dict[str, list[Any]]) -> _BagRun:
+        """Deserialise the summary's topics from the raw messages of each topic."""
+        store = make_typestore()
+
+        def decode(topic: str) -> list[Any]:
+            return [store.deserialize_cdr(m.data, m.msgtype) for m in by_topic.get(topic, [])]
+
+        truth, states, obs = (decode("sim_truth"), decode("controller_state"),
+                              decode("ball_observation"))
+        js_t = np.array([m.log_time for m in by_topic.get("joint_states", [])],
+                        dtype=float) / _NS
+        t_all = [a for a in (js_t, _stamps(truth), _stamps(states)) if a.size]
+        return cls(truth=truth, truth_t=_stamps(truth), states=states,
+                   state_t=_stamps(states), mode=np.array([s.mode for s in states], dtype=int),
+                   obs=obs, obs_t=_stamps(obs),
+                   t0=min(float(a.min()) for a in t_all) if t_all else math.nan,
+                   t1=max(float(a.max()) for a in t_all) if t_all else math.nan)
+
+
+def _topic_summary(by_topic: dict[str, list[Any]]) -> dict[str, dict[str, Any]]:
+    """Per topic (with its leading ``/``): message count, rate [Hz] of its log times, type."""
+    topics: dict[str, dict[str, Any]] = {}
+    for topic, msgs in sorted(by_topic.items()):
+        t = np.sort(np.array([m.log_time for m in msgs], dtype=float)) / _NS
+        topics["/" + topic] = {"count": len(msgs), "rate": _rate(t), "type": msgs[0].msgtype}
+    return topics
+
+
+def _mode_summary(run: _BagRun) -> dict[str, Any]:
+    """Steps per mode, the final mode, the control-loop rate and the first ROLLING step."""
+    mode, ts = run.mode, run.state_t
+    rolling = np.nonzero(mode == _ROLLING)[0]
+    return {
+        "modes": {_MODE_NAMES.get(k, str(k)): int(np.sum(mode == k)) for k in np.unique(mode)},
+        "final_mode": _MODE_NAMES.get(int(mode[-1]), "?") if mode.size else None,
+        "loop_rate": _rate(ts),
+        "rolling_from": float(ts[rolling[0]]) if rolling.size else None,
+    }
+
+
+def _rolling_until(run: _BagRun, start: float) -> float:
+    """End of the rolling that began at ``start`` [s].
+
+    The first later non-ROLLING step or true ``phi_dot <= 0``, whichever comes first; the
+    run's end if neither.
+    """
+    ts = run.state_t
+    until = run.t1
+    left = np.nonzero((ts > start) & (run.mode != _ROLLING))[0]
+    if left.size:
+        until = float(ts[left[0]])
+    if run.truth:
+        tt = run.truth_t
+        stopped = np.nonzero((tt > start) & (np.array([s.phi_dot for s in run.truth]) <= 0))[0]
+        if stopped.size:
+            until = min(until, float(tt[stopped[0]]))
+    return until
+
+
+def _mean_phi_dot(run: _BagRun, start: float, until: float) -> dict[str, Any]:
+    """Mean phi_dot [rad/s] over [start, until]: the truth's, else the controller's estimate."""
+    if run.truth:
+        tt = run.truth_t
+        ph = np.array([s.phi for s in run.truth])
+        w = (tt >= start) & (tt <= until)
+        mean = (float((ph[w][-1] - ph[w][0]) / (tt[w][-1] - tt[w][0]))
+                if np.count_nonzero(w) > 1 else math.nan)
+        return {"mean_phi_dot": mean, "mean_phi_dot_source": "sim_truth"}
+    ts = run.state_t
+    sel = (ts >= start) & (ts <= until)
+    pd = np.array([s.phi_dot for s in run.states])
+    return {"mean_phi_dot": float(np.nanmean(pd[sel])) if sel.any() else math.nan,
+            "mean_phi_dot_source": "controller estimate"}
+
+
+def _rolling_summary(run: _BagRun, rolling_from: float | None) -> dict[str, Any]:
+    """How long the ball rolled under control from ``rolling_from`` [s], how well, how fast.
+
+    RMS of y [rad] and z [rad/s] over the last half of the rolling time; without a ROLLING
+    step the figures are empty (0 s, NaN).
+    """
+    if rolling_from is None:
+        return {"rolling_until": None, "rolling_time": 0.0, "kept_rolling": False,
+                "mean_phi_dot": math.nan, "rms_y": math.nan, "rms_z": math.nan}
+    start = rolling_from
+    until = _rolling_until(run, start)
+    ts = run.state_t
+    half = (ts >= start) & (ts <= until) & (ts >= start + 0.5 * (until - start))
+    y = np.array([s.y for s in run.states])
+    z = np.array([s.z for s in run.states])
+    return {
+        "rolling_until": until,
+        "rolling_time": until - float(start),
+        "kept_rolling": bool(until >= run.t1 - 1e-6 and run.mode[-1] == _ROLLING),
+        "rms_y": float(np.sqrt(np.nanmean(y[half] ** 2))) if half.any() else math.nan,
+        "rms_z": float(np.sqrt(np.nanmean(z[half] ** 2))) if half.any() else math.nan,
+        **_mean_phi_dot(run, start, until),
+    }
+
+
+def _camera_summary(run: _BagRun) -> dict[str, Any]:
+    """The camera's figures: observation rate [Hz], frames, valid fraction, processing time.
+
+    The processing time is the median [ms]; with a truth, the median error [mm] of the valid
+    fixes against it at the same exposure stamps is added.
+    """
+    obs, ot = run.obs, run.obs_t
+    out: dict[str, Any] = {
+        "camera_rate": _rate(ot),
+        "camera_frames": len(obs),
+        "camera_valid_fraction": float(np.mean([o.valid for o in obs])) if obs else 0.0,
+        "camera_processing_ms": (float(np.median([o.processing_time for o in obs])) * 1e3
+                                 if obs else math.nan),
+    }
+    if run.truth and obs:  # camera accuracy against the truth at the same exposure stamps
+        tt, truth = run.truth_t, run.truth
+        idx = np.searchsorted(tt, ot)
+        ok = (idx < tt.size) & np.array([o.valid for o in obs])
+        ok[ok] &= np.abs(tt[idx[ok]] - ot[ok]) < 1e-6
+        if ok.any():
+            err = [math.hypot(obs[i].x - truth[idx[i]].ball_x, obs[i].y - truth[idx[i]].ball_y)
+                   for i in np.nonzero(ok)[0]]
+            out["camera_error_mm_median"] = 1e3 * float(np.median(err))
+    return out
+
+
 def summarize_bag(path: str | Path) -> dict[str, Any]:
     """What happened in a rig run, from its bag (simulated time throughout).
 
@@ -221,94 +392,18 @@ def summarize_bag(path: str | Path) -> dict[str, Any]:
         over the last half of the rolling time, ``max_abs_torque`` [N m].
     """
     contents = read_bag_messages(path)
-    store = make_typestore()
     by_topic: dict[str, list[Any]] = {}
     for m in contents.messages:
         by_topic.setdefault(m.topic.lstrip("/"), []).append(m)
-    names = {0: "WAITING", 1: "ROLLING", 2: "BALL_LOST", 3: "FAULT"}
-
-    def decode(topic: str) -> list[Any]:
-        return [store.deserialize_cdr(m.data, m.msgtype) for m in by_topic.get(topic, [])]
-
-    def stamps(msgs: list[Any]) -> np.ndarray:
-        return np.array([s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec for s in msgs])
-
-    def rate(t: np.ndarray) -> float:
-        return float((t.size - 1) / (t[-1] - t[0])) if t.size > 1 and t[-1] > t[0] else 0.0
-
-    topics: dict[str, dict[str, Any]] = {}
-    for topic, msgs in sorted(by_topic.items()):
-        t = np.sort(np.array([m.log_time for m in msgs], dtype=float)) / _NS
-        topics["/" + topic] = {"count": len(msgs), "rate": rate(t), "type": msgs[0].msgtype}
-    truth = decode("sim_truth")
-    states = decode("controller_state")
-    obs = decode("ball_observation")
-    out: dict[str, Any] = {"bag": str(path), "complete": contents.complete, "topics": topics,
-                           "warnings": contents.warnings}
-    js = by_topic.get("joint_states", [])
-    js_t = np.array([m.log_time for m in js], dtype=float) / _NS
-    t_all = [a for a in (js_t, stamps(truth), stamps(states)) if a.size]
-    t0 = min(float(a.min()) for a in t_all) if t_all else math.nan
-    t1 = max(float(a.max()) for a in t_all) if t_all else math.nan
-    out["duration"] = t1 - t0
-    ts = stamps(states)
-    mode = np.array([s.mode for s in states], dtype=int)
-    out["modes"] = {names.get(k, str(k)): int(np.sum(mode == k)) for k in np.unique(mode)}
-    out["final_mode"] = names.get(int(mode[-1]), "?") if mode.size else None
-    out["loop_rate"] = rate(ts)
-    rolling = np.nonzero(mode == 1)[0]
-    out["rolling_from"] = float(ts[rolling[0]]) if rolling.size else None
-    until = t1
-    if rolling.size:
-        start = ts[rolling[0]]
-        left = np.nonzero((ts > start) & (mode != 1))[0]
-        if left.size:
-            until = float(ts[left[0]])
-        if truth:
-            tt = stamps(truth)
-            stopped = np.nonzero((tt > start) & (np.array([s.phi_dot for s in truth]) <= 0))[0]
-            if stopped.size:
-                until = min(until, float(tt[stopped[0]]))
-        out["rolling_until"] = until
-        out["rolling_time"] = until - float(start)
-        out["kept_rolling"] = bool(until >= t1 - 1e-6 and mode[-1] == 1)
-        sel = (ts >= start) & (ts <= until)
-        half = sel & (ts >= start + 0.5 * (until - start))
-        y = np.array([s.y for s in states])
-        z = np.array([s.z for s in states])
-        out["rms_y"] = float(np.sqrt(np.nanmean(y[half] ** 2))) if half.any() else math.nan
-        out["rms_z"] = float(np.sqrt(np.nanmean(z[half] ** 2))) if half.any() else math.nan
-        if truth:
-            tt = stamps(truth)
-            ph = np.array([s.phi for s in truth])
-            w = (tt >= start) & (tt <= until)
-            out["mean_phi_dot"] = (float((ph[w][-1] - ph[w][0]) / (tt[w][-1] - tt[w][0]))
-                                   if np.count_nonzero(w) > 1 else math.nan)
-            out["mean_phi_dot_source"] = "sim_truth"
-        else:
-            pd = np.array([s.phi_dot for s in states])
-            out["mean_phi_dot"] = float(np.nanmean(pd[sel])) if sel.any() else math.nan
-            out["mean_phi_dot_source"] = "controller estimate"
-    else:
-        out.update(rolling_until=None, rolling_time=0.0, kept_rolling=False,
-                   mean_phi_dot=math.nan, rms_y=math.nan, rms_z=math.nan)
-    torque = np.array([s.torque for s in states]) if states else np.zeros(0)
+    run = _BagRun.decode(by_topic)
+    out: dict[str, Any] = {"bag": str(path), "complete": contents.complete,
+                           "topics": _topic_summary(by_topic), "warnings": contents.warnings,
+                           "duration": run.t1 - run.t0}
+    out.update(_mode_summary(run))
+    out.update(_rolling_summary(run, out["rolling_from"]))
+    torque = np.array([s.torque for s in run.states]) if run.states else np.zeros(0)
     out["max_abs_torque"] = float(np.max(np.abs(torque))) if torque.size else 0.0
-    ot = stamps(obs)
-    out["camera_rate"] = rate(ot)
-    out["camera_frames"] = len(obs)
-    out["camera_valid_fraction"] = (float(np.mean([o.valid for o in obs])) if obs else 0.0)
-    out["camera_processing_ms"] = (float(np.median([o.processing_time for o in obs])) * 1e3
-                                   if obs else math.nan)
-    if truth and obs:  # camera accuracy against the truth at the same exposure stamps
-        tt = stamps(truth)
-        idx = np.searchsorted(tt, ot)
-        ok = (idx < tt.size) & np.array([o.valid for o in obs])
-        ok[ok] &= np.abs(tt[idx[ok]] - ot[ok]) < 1e-6
-        if ok.any():
-            err = [math.hypot(obs[i].x - truth[idx[i]].ball_x, obs[i].y - truth[idx[i]].ball_y)
-                   for i in np.nonzero(ok)[0]]
-            out["camera_error_mm_median"] = 1e3 * float(np.median(err))
+    out.update(_camera_summary(run))
     return out
 
 

@@ -1,16 +1,16 @@
-"""Launch the bfr rig on a real ROS 2 Jazzy install (``ros2 launch bfr_control rig.launch.py``).
+"""Launch the bfr rig on a real ROS 2 Jazzy install (``ros2 launch bfr_tools rig.launch.py``).
 
 Emulated rig (default): simulator, camera, controller and, with ``record:=<dir>``, the
 recorder; every node but the simulator follows its ``/clock``. The ball starts on the
 controller's orbit at contact angle ``phase`` with the frame ``d_theta`` off it.
 
-    ros2 launch bfr_control rig.launch.py mode:=realtime record:=/tmp/run1
+    ros2 launch bfr_tools rig.launch.py mode:=realtime record:=/tmp/run1
 
 Real rig (``hardware:=true``): only the camera and controller nodes, against the drivers'
 topics (docs/hardware.md): ``image_topic``/``camera_info_topic`` of the camera driver,
 ros2_control's ``/joint_states`` and ``/effort_controller/commands``.
 
-    ros2 launch bfr_control rig.launch.py hardware:=true camera_params:=my_camera.yaml \
+    ros2 launch bfr_tools rig.launch.py hardware:=true camera_params:=my_camera.yaml \
         image_topic:=/cam/image_raw camera_info_topic:=/cam/camera_info
 
 Here, where ``ros2 launch`` is not available, ``scripts/bfr rig`` starts the same nodes.

@@ -747,6 +747,297 @@ def _zoh(src_ns: NDArray[np.int64], values: NDArray[Any], at_ns: NDArray[np.int6
     return out, have
 
 
+def _hold(src_ns: NDArray[np.int64], values: Any,
+          at_ns: NDArray[np.int64]) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Zero-order hold (NaN before the first) of ``values`` stamped ``src_ns`` in any order.
+
+    Samples are sorted by stamp (stable: of equal stamps the last one is held).
+    """
+    order = np.argsort(src_ns, kind="stable")
+    return _zoh(src_ns[order], np.asarray(values)[order], at_ns, np.nan)
+
+
+def _header_ns(msgs: list[Any]) -> NDArray[np.int64]:
+    """Header stamps of decoded messages [ns]."""
+    return np.array([m.header.stamp.sec * _NS + m.header.stamp.nanosec for m in msgs],
+                    dtype=np.int64)
+
+
+def _log_ns(msgs: list[RawMessage], offset: int) -> NDArray[np.int64]:
+    """Receive (log) times of raw messages mapped to the header clock [ns]."""
+    return np.array([m.log_time for m in msgs], dtype=np.int64) - offset
+
+
+def _warn_or_raise(problems: list[str], strict: bool) -> None:
+    """Raise :class:`BagError` for a partly read bag when ``strict``, else warn.
+
+    The warnings point at the caller of :func:`read_bag` (``stacklevel=3``).
+    """
+    if not problems:
+        return
+    if strict:
+        raise BagError("; ".join(problems))
+    for w in problems:
+        warnings.warn(w, BagWarning, stacklevel=3)
+
+
+def _bag_typestore(contents: BagContents, msg_dirs: list[str | Path] | None) -> Any:
+    """The typestore of ``msg_dirs``, plus the bag's embedded definitions of unknown types."""
+    store = make_typestore(msg_dirs)
+    for msgtype, text in contents.schemas.items():
+        _register_from_schema(store, msgtype, text)
+    return store
+
+
+def _messages_by_role(contents: BagContents,
+                      names: dict[str, str]) -> dict[str, list[RawMessage]]:
+    """The bag's messages per role (``names``: topic per role, without leading ``/``).
+
+    Raises
+    ------
+    BagError
+        No message on the ``joint_states`` topic (the time base).
+    """
+    by_role: dict[str, list[RawMessage]] = {r: [] for r in names}
+    role_of = {v: k for k, v in names.items()}
+    for m in contents.messages:
+        role = role_of.get(m.topic.lstrip("/"))
+        if role is not None:
+            by_role[role].append(m)
+    if not by_role["joint_states"]:
+        topics = sorted({m.topic for m in contents.messages})
+        why = f" ({'; '.join(contents.warnings)})" if contents.warnings else ""
+        raise BagError(f"{contents.path}: no messages on {names['joint_states']!r} (the time "
+                       f"base); topics in the bag: {topics}{why}")
+    return by_role
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Decoder:
+    """Deserialise the raw messages of one bag; a failure names the bag, type and topic."""
+
+    store: Any
+    path: Path
+
+    def __call__(self, m: RawMessage) -> Any:
+        """The decoded message."""
+        try:
+            return self.store.deserialize_cdr(m.data, m.msgtype)
+        except Exception as exc:
+            raise BagError(f"{self.path}: cannot decode a {m.msgtype} message on "
+                           f"{m.topic!r} at {m.log_time} ns: {exc}") from exc
+
+
+@dataclass(frozen=True, kw_only=True)
+class _JointStates:
+    """The ``joint_states`` time base of a bag and the frame joint's values on it.
+
+    Attributes
+    ----------
+    stamp : ndarray of int
+        Header stamps [ns], sorted, without duplicates.
+    offset : int
+        Median of log time minus header stamp [ns]: maps log times to the header clock.
+    theta, theta_dot, effort : ndarray
+        Position [rad], velocity [rad/s] and effort [N m] of the frame joint.
+    """
+
+    stamp: NDArray[np.int64]
+    offset: int
+    theta: NDArray[np.float64]
+    theta_dot: NDArray[np.float64]
+    effort: NDArray[np.float64]
+
+
+def _joint_value(seq: Any, j: int) -> float:
+    """Entry ``j`` of a ``JointState`` array (NaN if it is shorter)."""
+    return float(seq[j]) if len(seq) > j else float("nan")
+
+
+def _sorted_unique(stamp: NDArray[np.int64], notes: list[str]) -> NDArray[np.intp]:
+    """Indices sorting ``stamp`` (stable), of each repeated stamp only the first."""
+    order = np.argsort(stamp, kind="stable")
+    keep = np.ones(order.size, bool)
+    keep[1:] = np.diff(stamp[order]) > 0
+    if not keep.all() or not np.all(order == np.arange(order.size)):
+        notes.append(f"joint_states: sorted by stamp, {int((~keep).sum())} duplicate stamp(s) "
+                     f"dropped")
+    return order[keep]
+
+
+def _read_joint_states(msgs: list[RawMessage], decode: _Decoder,
+                       notes: list[str]) -> _JointStates:
+    """Decode ``joint_states``: the time base and the frame joint (index 0 if not named).
+
+    A missing velocity is replaced by the numerical derivative of the position.
+    """
+    js = [decode(m) for m in msgs]
+    stamp = _header_ns(js)
+    order = _sorted_unique(stamp, notes)
+    js, stamp = [js[i] for i in order], stamp[order]
+    offset = int(np.median(_log_ns(msgs, 0)[order] - stamp))
+    first = js[0].name
+    j = first.index(FRAME_JOINT) if FRAME_JOINT in first else 0
+    if FRAME_JOINT not in first:
+        notes.append(f"joint_states: no {FRAME_JOINT!r} joint; used index 0 ({first[:1]})")
+    theta = np.array([_joint_value(s.position, j) for s in js])
+    theta_dot = np.array([_joint_value(s.velocity, j) for s in js])
+    if np.isnan(theta_dot).any():
+        ts_s = stamp / _NS
+        theta_dot = np.where(np.isnan(theta_dot),
+                             np.gradient(theta, ts_s) if len(js) > 1 else 0.0, theta_dot)
+        notes.append("theta_dot: joint_states without velocity; numerical derivative used")
+    return _JointStates(stamp=stamp, offset=offset, theta=theta, theta_dot=theta_dot,
+                        effort=np.array([_joint_value(s.effort, j) for s in js]))
+
+
+def _torque(js: _JointStates, cmds: list[RawMessage], decode: _Decoder,
+            notes: list[str]) -> NDArray[np.float64]:
+    """The latest command at each sample; joint effort before it, 0 where neither is known."""
+    torque = js.effort.copy()
+    if cmds:
+        held, have = _hold(_log_ns(cmds, js.offset),
+                           np.array([_first(decode(m).data) for m in cmds]), js.stamp)
+        torque = np.where(have, held, js.effort)
+        if not have.all():
+            notes.append(f"torque: joint_states effort used for {int((~have).sum())} sample(s) "
+                         f"before the first command")
+    else:
+        notes.append("torque: no command topic; joint_states effort used")
+    if np.isnan(torque).any():
+        torque = np.nan_to_num(torque, nan=0.0)
+        notes.append("torque: unknown samples set to 0")
+    return torque
+
+
+@dataclass(frozen=True, kw_only=True)
+class _BallFields:
+    """The held ball observation at each sample (NaN where not valid).
+
+    Attributes
+    ----------
+    x, y : ndarray
+        Ball centre in the world frame [m].
+    phi : ndarray
+        Ball-centre angle [rad].
+    valid : ndarray of bool
+        A valid observation with finite ``x, y`` is held.
+    """
+
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+    phi: NDArray[np.float64]
+    valid: NDArray[np.bool_]
+
+
+def _ball_fields(js: _JointStates, obs_msgs: list[RawMessage], decode: _Decoder,
+                 notes: list[str]) -> _BallFields:
+    """Hold the latest ball observation (by log time) at each sample.
+
+    A valid observation without ``phi`` gets ``theta + atan2(x, y)``.
+    """
+    n = js.stamp.size
+    if not obs_msgs:
+        return _BallFields(x=np.full(n, np.nan), y=np.full(n, np.nan), phi=np.full(n, np.nan),
+                           valid=np.zeros(n, bool))
+    vals = np.array([[b.x, b.y, b.phi, 1.0 if b.valid else 0.0]
+                     for b in (decode(m) for m in obs_msgs)])
+    sel, have = _hold(_log_ns(obs_msgs, js.offset), vals, js.stamp)
+    valid = have & (sel[:, 3] > 0) & np.isfinite(sel[:, 0]) & np.isfinite(sel[:, 1])
+    ball_x = np.where(valid, sel[:, 0], np.nan)
+    ball_y = np.where(valid, sel[:, 1], np.nan)
+    phi = np.where(valid, sel[:, 2], np.nan)
+    bad_phi = valid & ~np.isfinite(phi)
+    if bad_phi.any():
+        phi[bad_phi] = js.theta[bad_phi] + np.arctan2(ball_x[bad_phi], ball_y[bad_phi])
+        notes.append("ball: phi missing in some observations; theta + atan2(x, y) used")
+    return _BallFields(x=ball_x, y=ball_y, phi=phi, valid=valid)
+
+
+#: ``Recording`` field per ``SimTruth`` field read from the ``truth`` topic.
+_TRUTH_FIELDS = {"theta_true": "theta", "theta_dot_true": "theta_dot", "phi_true": "phi",
+                 "phi_dot_true": "phi_dot", "ball_x_true": "ball_x", "ball_y_true": "ball_y",
+                 "kinetic": "kinetic", "potential": "potential", "energy": "energy"}
+
+
+def _optional_fields(js: _JointStates, by_role: dict[str, list[RawMessage]],
+                     decode: _Decoder) -> dict[str, NDArray[np.float64]]:
+    """Optional recording fields held by header stamp: ``phi_dot`` and the ground truth.
+
+    ``phi_dot`` comes from the ``controller`` topic; a truth field is kept unless all NaN.
+    """
+    out: dict[str, NDArray[np.float64]] = {}
+    if by_role["controller"]:
+        cs = [decode(m) for m in by_role["controller"]]
+        held, have = _hold(_header_ns(cs), np.array([c.phi_dot for c in cs]), js.stamp)
+        out["phi_dot"] = np.where(have, held, np.nan)
+    if by_role["truth"]:
+        tr = [decode(m) for m in by_role["truth"]]
+        table = np.array([[getattr(s, f) for f in _TRUTH_FIELDS.values()] for s in tr])
+        held, have = _hold(_header_ns(tr), table, js.stamp)
+        for c, name in enumerate(_TRUTH_FIELDS):
+            col = np.where(have, held[:, c], np.nan)
+            if not np.all(np.isnan(col)):
+                out[name] = col
+    return out
+
+
+def _time_axis(stamp: NDArray[np.int64], time_origin: str) -> tuple[NDArray[np.float64], int]:
+    """Sample times [s] from the stamps and the origin subtracted [ns] (see :func:`read_bag`).
+
+    Raises
+    ------
+    BagError
+        An unknown ``time_origin``.
+    """
+    origin = 0
+    if time_origin == "first" or (time_origin == "auto" and stamp[0] > 10**8 * _NS):
+        origin = int(stamp[0])
+    elif time_origin not in ("auto", "absolute", "first"):
+        raise BagError(f"time_origin must be 'auto', 'absolute' or 'first', got {time_origin!r}")
+    t = (stamp - origin) // _NS + ((stamp - origin) % _NS) / _NS
+    return t, origin
+
+
+def _bag_meta(contents: BagContents, source: Path, names: dict[str, str],
+              by_role: dict[str, list[RawMessage]], origin: int,
+              notes: list[str]) -> dict[str, Any]:
+    """``Recording.meta``: the stored ``bfr_recording`` metadata updated with this read.
+
+    Provenance, storage, topics, time origin, and the bag's warnings and ``notes`` appended
+    to those stored.
+    """
+    meta: dict[str, Any] = {}
+    if _META_NAME in contents.metadata:
+        try:
+            meta = json.loads(contents.metadata[_META_NAME].get("meta", "{}"))
+        except json.JSONDecodeError:
+            notes.append("bag: bfr_recording metadata is not valid JSON; ignored")
+    original_source = meta.get("source")
+    meta["source"] = str(source)
+    meta["source_kind"] = "bag" if not meta.get("source_kind") else meta["source_kind"]
+    if original_source is not None and original_source != str(source):
+        meta["original_source"] = original_source
+    meta["bag_storage"] = contents.storage
+    meta["bag_complete"] = contents.complete
+    meta["bag_topics"] = {r: names[r] for r in names if by_role[r]}
+    meta["time_origin_ns"] = origin
+    meta["warnings"] = [*meta.get("warnings", []), *contents.warnings]
+    meta["notes"] = [*meta.get("notes", []), *notes]
+    return meta
+
+
+def _extra_arrays(contents: BagContents, n: int) -> dict[str, np.ndarray]:
+    """The ``extra`` arrays of the bag's attachment, those of shape ``(n,)`` only."""
+    extra: dict[str, np.ndarray] = {}
+    if _EXTRA_ATTACHMENT in contents.attachments:
+        with np.load(io.BytesIO(contents.attachments[_EXTRA_ATTACHMENT])) as npz:
+            for k in npz.files:
+                if npz[k].shape == (n,):
+                    extra[k] = npz[k]
+    return extra
+
+
 def read_bag(path: str | Path, topic_map: dict[str, str] | None = None, *,
              strict: bool = False, msg_dirs: list[str | Path] | None = None,
              time_origin: str = "auto") -> Recording:
@@ -784,159 +1075,21 @@ def read_bag(path: str | Path, topic_map: dict[str, str] | None = None, *,
     """
     p = Path(path)
     contents = read_bag_messages(p)
-    if contents.warnings:
-        if strict:
-            raise BagError("; ".join(contents.warnings))
-        for w in contents.warnings:
-            warnings.warn(w, BagWarning, stacklevel=2)
+    _warn_or_raise(contents.warnings, strict)
     names = {k: v.lstrip("/") for k, v in _resolve_topics(topic_map).items()}
-    store = make_typestore(msg_dirs)
-    for msgtype, text in contents.schemas.items():
-        _register_from_schema(store, msgtype, text)
-    by_role: dict[str, list[RawMessage]] = {r: [] for r in names}
-    role_of = {v: k for k, v in names.items()}
-    for m in contents.messages:
-        role = role_of.get(m.topic.lstrip("/"))
-        if role is not None:
-            by_role[role].append(m)
-    if not by_role["joint_states"]:
-        topics = sorted({m.topic for m in contents.messages})
-        why = f" ({'; '.join(contents.warnings)})" if contents.warnings else ""
-        raise BagError(f"{contents.path}: no messages on {names['joint_states']!r} (the time "
-                       f"base); topics in the bag: {topics}{why}")
-
-    def decode(m: RawMessage) -> Any:
-        try:
-            return store.deserialize_cdr(m.data, m.msgtype)
-        except Exception as exc:
-            raise BagError(f"{contents.path}: cannot decode a {m.msgtype} message on "
-                           f"{m.topic!r} at {m.log_time} ns: {exc}") from exc
-
+    decode = _Decoder(store=_bag_typestore(contents, msg_dirs), path=contents.path)
+    by_role = _messages_by_role(contents, names)
     notes: list[str] = []
-    js = [decode(m) for m in by_role["joint_states"]]
-    js_log = np.array([m.log_time for m in by_role["joint_states"]], dtype=np.int64)
-    stamp = np.array([s.header.stamp.sec * _NS + s.header.stamp.nanosec for s in js],
-                     dtype=np.int64)
-    order = np.argsort(stamp, kind="stable")
-    keep = np.ones(order.size, bool)
-    keep[1:] = np.diff(stamp[order]) > 0
-    if not keep.all() or not np.all(order == np.arange(order.size)):
-        notes.append(f"joint_states: sorted by stamp, {int((~keep).sum())} duplicate stamp(s) "
-                     f"dropped")
-    order = order[keep]
-    js = [js[i] for i in order]
-    stamp, js_log = stamp[order], js_log[order]
-    offset = int(np.median(js_log - stamp))
-    n_js = len(js)
-    first = js[0].name
-    j = first.index(FRAME_JOINT) if FRAME_JOINT in first else 0
-    if FRAME_JOINT not in first:
-        notes.append(f"joint_states: no {FRAME_JOINT!r} joint; used index 0 ({first[:1]})")
-
-    def pick(seq: Any, default: float = float("nan")) -> float:
-        return float(seq[j]) if len(seq) > j else default
-
-    theta = np.array([pick(s.position) for s in js])
-    theta_dot = np.array([pick(s.velocity) for s in js])
-    if np.isnan(theta_dot).any():
-        ts_s = stamp / _NS
-        theta_dot = np.where(np.isnan(theta_dot),
-                             np.gradient(theta, ts_s) if n_js > 1 else 0.0, theta_dot)
-        notes.append("theta_dot: joint_states without velocity; numerical derivative used")
-    effort = np.array([pick(s.effort) for s in js])
-    torque = effort.copy()
-    if by_role["command"]:
-        cmds = by_role["command"]
-        c_ns = np.array([m.log_time for m in cmds], dtype=np.int64) - offset
-        c_val = np.array([_first(decode(m).data) for m in cmds])
-        o = np.argsort(c_ns, kind="stable")
-        held, have = _zoh(c_ns[o], c_val[o], stamp, np.nan)
-        torque = np.where(have, held, effort)
-        if not have.all():
-            notes.append(f"torque: joint_states effort used for {int((~have).sum())} sample(s) "
-                         f"before the first command")
-    else:
-        notes.append("torque: no command topic; joint_states effort used")
-    if np.isnan(torque).any():
-        torque = np.nan_to_num(torque, nan=0.0)
-        notes.append("torque: unknown samples set to 0")
-
-    n = stamp.size
-    ball_x = np.full(n, np.nan)
-    ball_y = np.full(n, np.nan)
-    phi = np.full(n, np.nan)
-    valid = np.zeros(n, bool)
-    if by_role["ball"]:
-        obs = [decode(m) for m in by_role["ball"]]
-        b_ns = np.array([m.log_time for m in by_role["ball"]], dtype=np.int64) - offset
-        o = np.argsort(b_ns, kind="stable")
-        b_ns = b_ns[o]
-        obs = [obs[i] for i in o]
-        vals = np.array([[b.x, b.y, b.phi, 1.0 if b.valid else 0.0] for b in obs])
-        sel, have = _zoh(b_ns, vals, stamp, np.nan)
-        valid = have & (sel[:, 3] > 0) & np.isfinite(sel[:, 0]) & np.isfinite(sel[:, 1])
-        ball_x = np.where(valid, sel[:, 0], np.nan)
-        ball_y = np.where(valid, sel[:, 1], np.nan)
-        phi = np.where(valid, sel[:, 2], np.nan)
-        bad_phi = valid & ~np.isfinite(phi)
-        if bad_phi.any():
-            phi[bad_phi] = theta[bad_phi] + np.arctan2(ball_x[bad_phi], ball_y[bad_phi])
-            notes.append("ball: phi missing in some observations; theta + atan2(x, y) used")
-    kwargs: dict[str, Any] = {}
-    if by_role["controller"]:
-        cs = [decode(m) for m in by_role["controller"]]
-        c_ns = np.array([c.header.stamp.sec * _NS + c.header.stamp.nanosec for c in cs],
-                        dtype=np.int64)
-        o = np.argsort(c_ns, kind="stable")
-        held, have = _zoh(c_ns[o], np.array([c.phi_dot for c in cs])[o], stamp, np.nan)
-        kwargs["phi_dot"] = np.where(have, held, np.nan)
-    if by_role["truth"]:
-        tr = [decode(m) for m in by_role["truth"]]
-        t_ns = np.array([s.header.stamp.sec * _NS + s.header.stamp.nanosec for s in tr],
-                        dtype=np.int64)
-        o = np.argsort(t_ns, kind="stable")
-        fields = {"theta_true": "theta", "theta_dot_true": "theta_dot", "phi_true": "phi",
-                  "phi_dot_true": "phi_dot", "ball_x_true": "ball_x", "ball_y_true": "ball_y",
-                  "kinetic": "kinetic", "potential": "potential", "energy": "energy"}
-        table = np.array([[getattr(s, f) for f in fields.values()] for s in tr])[o]
-        held, have = _zoh(t_ns[o], table, stamp, np.nan)
-        for c, name in enumerate(fields):
-            col = np.where(have, held[:, c], np.nan)
-            if not np.all(np.isnan(col)):
-                kwargs[name] = col
-    origin = 0
-    if time_origin == "first" or (time_origin == "auto" and stamp[0] > 10**8 * _NS):
-        origin = int(stamp[0])
-    elif time_origin not in ("auto", "absolute", "first"):
-        raise BagError(f"time_origin must be 'auto', 'absolute' or 'first', got {time_origin!r}")
-    t = (stamp - origin) // _NS + ((stamp - origin) % _NS) / _NS
-    meta: dict[str, Any] = {}
-    if _META_NAME in contents.metadata:
-        try:
-            meta = json.loads(contents.metadata[_META_NAME].get("meta", "{}"))
-        except json.JSONDecodeError:
-            notes.append("bag: bfr_recording metadata is not valid JSON; ignored")
-    original_source = meta.get("source")
-    meta["source"] = str(p)
-    meta["source_kind"] = "bag" if not meta.get("source_kind") else meta["source_kind"]
-    if original_source is not None and original_source != str(p):
-        meta["original_source"] = original_source
-    meta["bag_storage"] = contents.storage
-    meta["bag_complete"] = contents.complete
-    meta["bag_topics"] = {r: names[r] for r in names if by_role[r]}
-    meta["time_origin_ns"] = origin
-    meta["warnings"] = [*meta.get("warnings", []), *contents.warnings]
-    meta["notes"] = [*meta.get("notes", []), *notes]
-    extra: dict[str, np.ndarray] = {}
-    if _EXTRA_ATTACHMENT in contents.attachments:
-        with np.load(io.BytesIO(contents.attachments[_EXTRA_ATTACHMENT])) as npz:
-            for k in npz.files:
-                if npz[k].shape == (n,):
-                    extra[k] = npz[k]
+    js = _read_joint_states(by_role["joint_states"], decode, notes)
+    torque = _torque(js, by_role["command"], decode, notes)
+    ball = _ball_fields(js, by_role["ball"], decode, notes)
+    optional = _optional_fields(js, by_role, decode)
+    t, origin = _time_axis(js.stamp, time_origin)
+    meta = _bag_meta(contents, p, names, by_role, origin, notes)
     try:
-        rec = Recording(t=t, theta=theta, theta_dot=theta_dot, torque=torque, ball_x=ball_x,
-                        ball_y=ball_y, ball_valid=valid, phi=phi, extra=extra, meta=meta,
-                        **kwargs)
+        rec = Recording(t=t, theta=js.theta, theta_dot=js.theta_dot, torque=torque,
+                        ball_x=ball.x, ball_y=ball.y, ball_valid=ball.valid, phi=ball.phi,
+                        extra=_extra_arrays(contents, js.stamp.size), meta=meta, **optional)
     except RecordingError as exc:
         raise BagError(f"{contents.path}: {exc}") from exc
     rec.meta["sample_rate"] = rec.sample_rate()

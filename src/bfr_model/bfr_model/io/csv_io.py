@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import math
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -123,29 +124,47 @@ def write_csv(path: str | Path, rec: Recording, *, meta: bool = True,
         np.savetxt(fh, data, delimiter=",", fmt=fmt)
 
 
-def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
-    """Read a CSV recording (see the module doc for the format).
+@dataclass(frozen=True, kw_only=True)
+class _CsvTable:
+    """The text cells of a CSV recording, with the metadata read before its header.
 
-    Parameters
+    Attributes
     ----------
-    path : str or Path
-        The CSV file.
-    phi_kind : {"contact", "ball_centre"}, optional
-        Override the meaning of the ``phi`` column (default: the ``phi_kind`` metadata,
-        else ``"contact"`` as ``bfr simulate`` writes).
+    meta : dict
+        ``# key: value`` lines before the header (values parsed as JSON when they are).
+    header : list of str
+        Column names.
+    header_line : int
+        1-based line number of the header.
+    rows : list of list of str
+        Cells of each data row, as many as header columns.
+    row_lines : list of int
+        1-based line number of each row.
+    """
+
+    meta: dict[str, Any]
+    header: list[str]
+    header_line: int
+    rows: list[list[str]]
+    row_lines: list[int]
+
+
+def _read_text(p: Path) -> str:
+    """The file's text (undecodable bytes replaced); a read failure as :class:`CsvFormatError`."""
+    try:
+        return p.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise CsvFormatError(f"{p}: cannot read: {exc}") from exc
+
+
+def _split_table(p: Path, text: str) -> _CsvTable:
+    """Split the text into metadata, header and rows; blank and comment lines are skipped.
 
     Raises
     ------
     CsvFormatError
-        Missing file, no header, missing required columns, a row with the wrong number of
-        fields (e.g. a truncated last line), a non-numeric cell, or invalid recording data
-        (the message names the line and column).
+        A row with another number of fields than the header, or no header.
     """
-    p = Path(path)
-    try:
-        text = p.read_text(encoding="utf-8", errors="replace")
-    except OSError as exc:
-        raise CsvFormatError(f"{p}: cannot read: {exc}") from exc
     meta: dict[str, Any] = {}
     header: list[str] | None = None
     header_line = 0
@@ -180,6 +199,19 @@ def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
         row_lines.append(i + 1)
     if header is None:
         raise CsvFormatError(f"{p}: no header row (file is empty or only comments)")
+    return _CsvTable(meta=meta, header=header, header_line=header_line, rows=rows,
+                     row_lines=row_lines)
+
+
+def _check_columns(p: Path, table: _CsvTable) -> None:
+    """Check for unique column names, the required columns and at least one row.
+
+    Raises
+    ------
+    CsvFormatError
+        Duplicate or missing columns, or no data rows.
+    """
+    header, header_line = table.header, table.header_line
     dup = sorted({c for c in header if header.count(c) > 1})
     if dup:
         raise CsvFormatError(f"{p}:{header_line}: duplicate column(s) {dup}")
@@ -187,23 +219,65 @@ def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
     if missing:
         raise CsvFormatError(f"{p}:{header_line}: missing required column(s) {missing}; "
                              f"found {header}")
-    if not rows:
+    if not table.rows:
         raise CsvFormatError(f"{p}: no data rows after the header (line {header_line})")
+
+
+def _columns(p: Path, table: _CsvTable) -> dict[str, np.ndarray]:
+    """The rows as float columns by name.
+
+    Raises
+    ------
+    CsvFormatError
+        The first non-numeric cell, naming its line and column.
+    """
     try:
-        data = np.array(rows, dtype=np.float64)
+        data = np.array(table.rows, dtype=np.float64)
     except ValueError:
-        for cells, ln in zip(rows, row_lines, strict=True):
-            for name, cell in zip(header, cells, strict=True):
+        for cells, ln in zip(table.rows, table.row_lines, strict=True):
+            for name, cell in zip(table.header, cells, strict=True):
                 try:
                     float(cell)
                 except ValueError:
                     raise CsvFormatError(f"{p}:{ln}: column {name!r}: non-numeric cell "
                                          f"{cell.strip()!r}") from None
         raise  # pragma: no cover - the loop above raises
-    col = {name: data[:, j] for j, name in enumerate(header)}
-    kind = phi_kind or meta.get("phi_kind", "contact")
-    if kind not in ("contact", "ball_centre"):
-        raise CsvFormatError(f"{p}: phi_kind must be 'contact' or 'ball_centre', got {kind!r}")
+    return {name: data[:, j] for j, name in enumerate(table.header)}
+
+
+def _phi_fields(col: dict[str, np.ndarray], valid: np.ndarray, kind: str) -> dict[str, Any]:
+    """The recording's angle fields from the ``phi, phi_dot`` columns of kind ``kind``.
+
+    ``"contact"``: the columns are the simulator's state, read into ``phi_true,
+    phi_dot_true`` with ``theta, theta_dot, ball_x, ball_y`` as ground truth; ``phi`` is the
+    ``phi_ball`` column or the ball-centre angle where valid, ``phi_dot`` the
+    ``phi_dot_ball`` column if any. ``"ball_centre"``: they are ``phi`` and ``phi_dot``
+    (None when all NaN).
+    """
+    if kind != "contact":
+        return {"phi": col["phi"],
+                "phi_dot": None if np.all(np.isnan(col["phi_dot"])) else col["phi_dot"]}
+    out: dict[str, Any] = {"phi_true": col["phi"], "phi_dot_true": col["phi_dot"]}
+    if "phi_ball" in col:
+        out["phi"] = col["phi_ball"]
+    else:
+        out["phi"] = np.where(valid, ball_centre_angle(col["theta"], col["ball_x"],
+                                                       col["ball_y"], near=col["phi"]),
+                              np.nan)
+    if "phi_dot_ball" in col:
+        out["phi_dot"] = col["phi_dot_ball"]
+    for name in ("theta", "theta_dot", "ball_x", "ball_y"):
+        out[f"{name}_true"] = col[name].copy()
+    return out
+
+
+def _recording_fields(col: dict[str, np.ndarray], header: list[str],
+                      kind: str) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Keyword arguments of :class:`Recording` from the columns, and the ``extra`` arrays.
+
+    Columns not read as a state, ball or energy field fill the optional recording field of
+    their name, else go to ``extra`` (an ``extra_`` prefix removed).
+    """
     if "ball_valid" in col:
         valid = col["ball_valid"] != 0
     else:
@@ -211,27 +285,10 @@ def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
     kwargs: dict[str, Any] = {name: col[name] for name in
                               ("t", "theta", "theta_dot", "torque", "ball_x", "ball_y")}
     kwargs["ball_valid"] = valid
+    kwargs.update(_phi_fields(col, valid, kind))
     used = {*REQUIRED_COLUMNS, "ball_valid", "kinetic", "potential", "energy"}
     if kind == "contact":
-        kwargs["phi_true"] = col["phi"]
-        kwargs["phi_dot_true"] = col["phi_dot"]
-        if "phi_ball" in col:
-            kwargs["phi"] = col["phi_ball"]
-            used.add("phi_ball")
-        else:
-            kwargs["phi"] = np.where(valid, ball_centre_angle(col["theta"], col["ball_x"],
-                                                              col["ball_y"], near=col["phi"]),
-                                     np.nan)
-        if "phi_dot_ball" in col:
-            kwargs["phi_dot"] = col["phi_dot_ball"]
-            used.add("phi_dot_ball")
-        kwargs.setdefault("theta_true", col["theta"].copy())
-        kwargs.setdefault("theta_dot_true", col["theta_dot"].copy())
-        kwargs.setdefault("ball_x_true", col["ball_x"].copy())
-        kwargs.setdefault("ball_y_true", col["ball_y"].copy())
-    else:
-        kwargs["phi"] = col["phi"]
-        kwargs["phi_dot"] = None if np.all(np.isnan(col["phi_dot"])) else col["phi_dot"]
+        used |= {"phi_ball", "phi_dot_ball"} & col.keys()
     for name in ("kinetic", "potential", "energy"):
         if name in col and not np.all(np.isnan(col[name])):
             kwargs[name] = col[name]
@@ -243,6 +300,12 @@ def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
             kwargs[name] = col[name]
         else:
             extra[name[len("extra_"):] if name.startswith("extra_") else name] = col[name]
+    return kwargs, extra
+
+
+def _csv_meta(meta: dict[str, Any], p: Path, kind: str,
+              col: dict[str, np.ndarray]) -> dict[str, Any]:
+    """``Recording.meta``: the file's metadata with provenance and the conversion made."""
     meta_out = dict(meta)
     meta_out.pop("phi_kind", None)
     conversions = list(meta_out.get("conversions", []))
@@ -253,15 +316,44 @@ def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
     if kind == "contact" and "phi_ball" not in col:
         conversions.append("csv: phi/phi_dot columns (contact-point state) read into "
                            "phi_true/phi_dot_true; phi = theta + atan2(ball_x, ball_y)")
+    return meta_out
+
+
+def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
+    """Read a CSV recording (see the module doc for the format).
+
+    Parameters
+    ----------
+    path : str or Path
+        The CSV file.
+    phi_kind : {"contact", "ball_centre"}, optional
+        Override the meaning of the ``phi`` column (default: the ``phi_kind`` metadata,
+        else ``"contact"`` as ``bfr simulate`` writes).
+
+    Raises
+    ------
+    CsvFormatError
+        Missing file, no header, missing required columns, a row with the wrong number of
+        fields (e.g. a truncated last line), a non-numeric cell, or invalid recording data
+        (the message names the line and column).
+    """
+    p = Path(path)
+    table = _split_table(p, _read_text(p))
+    _check_columns(p, table)
+    col = _columns(p, table)
+    kind = phi_kind or table.meta.get("phi_kind", "contact")
+    if kind not in ("contact", "ball_centre"):
+        raise CsvFormatError(f"{p}: phi_kind must be 'contact' or 'ball_centre', got {kind!r}")
+    kwargs, extra = _recording_fields(col, table.header, kind)
+    meta = _csv_meta(table.meta, p, kind, col)
     try:
-        rec = Recording(extra=extra, meta=meta_out, **kwargs)
+        rec = Recording(extra=extra, meta=meta, **kwargs)
     except RecordingError as exc:
         msg = str(exc)
         # Name the file line for sample-indexed errors.
-
         m = re.search(r"sample (\d+)", msg)
-        where = f"{p}:{row_lines[int(m.group(1))]}" if m and int(m.group(1)) < len(
-            row_lines) else str(p)
+        where = f"{p}:{table.row_lines[int(m.group(1))]}" if m and int(m.group(1)) < len(
+            table.row_lines) else str(p)
         raise CsvFormatError(f"{where}: {msg}") from exc
     rec.meta.setdefault("sample_rate", rec.sample_rate())
     return rec

@@ -212,6 +212,219 @@ def _classify_malformed(line: str) -> tuple[str, str]:
     return "malformed", f"keys out of order or repeated: {keys}"
 
 
+def _clean_terminal_line(line: str) -> str:
+    """What a terminal shows of ``line``: escape codes, overwritten text and controls removed.
+
+    Text after the last carriage return is what the terminal shows (unless it is blank, then
+    the carriage returns are only dropped); the result is stripped of surrounding blanks.
+    """
+    clean = _ANSI_RE.sub("", line)
+    if "\r" in clean:
+        tail = clean.rsplit("\r", 1)[-1]
+        clean = tail if tail.strip() else clean.replace("\r", "")
+    return _CTRL_RE.sub("", clean).strip()
+
+
+@dataclass(kw_only=True)
+class _RunRows:
+    """The data rows of one run as scanned (mutable; still text, not yet checked).
+
+    Attributes
+    ----------
+    rows : list of tuple of str
+        The values of each data line, in the order of :data:`KEYS`.
+    lines : list of int
+        1-based line number of each row.
+    events : list of (int, str)
+        ``(row index, message)`` of ``[inf]`` messages, as in :attr:`RigRun.events`.
+    """
+
+    rows: list[tuple[str, ...]] = field(default_factory=list)
+    lines: list[int] = field(default_factory=list)
+    events: list[tuple[int, str]] = field(default_factory=list)
+
+
+@dataclass(kw_only=True)
+class _LogScan:
+    """State of one pass over the lines of a log (mutable): runs so far, skips, warnings.
+
+    Attributes
+    ----------
+    source : str
+        Name used in messages.
+    last_nonempty : int
+        0-based index of the last non-blank line (-1: none); a partial data line there is
+        a truncated final line.
+    ends_with_newline : bool
+        Whether the text ends with a newline (said in the truncated-line warning).
+    runs : list of _RunRows
+        Runs in file order; the last one is being filled.
+    skipped : Counter
+        Skipped lines per reason (see :attr:`RigLog.skipped`).
+    warnings : list of str
+        Recoverable problems with their line numbers.
+    new_run_pending : bool
+        A restart marker was seen: the next data line starts a new run.
+    """
+
+    source: str
+    last_nonempty: int
+    ends_with_newline: bool
+    runs: list[_RunRows] = field(default_factory=lambda: [_RunRows()])
+    skipped: Counter[str] = field(default_factory=Counter)
+    warnings: list[str] = field(default_factory=list)
+    new_run_pending: bool = False
+
+    def add_data(self, groups: tuple[str, ...], lineno: int) -> None:
+        """Append a data row, first starting a new run after a restart marker."""
+        if self.new_run_pending and self.runs[-1].rows:
+            self.runs.append(_RunRows())
+        self.new_run_pending = False
+        self.runs[-1].rows.append(groups)
+        self.runs[-1].lines.append(lineno)
+
+    def add_info(self, msg: str) -> None:
+        """Count an ``[inf]`` message: a restart marker, or an event of the current run."""
+        self.skipped["info"] += 1
+        if msg.startswith("initializing hardware"):
+            self.new_run_pending = True
+        elif msg.startswith("stopped"):
+            self.new_run_pending = True
+        else:
+            self.runs[-1].events.append((len(self.runs[-1].rows), msg))
+
+
+def _scan_data_segments(scan: _LogScan, text: str, lineno: int, *,
+                        last_line: bool) -> None:
+    """Parse ``text``, one or more data lines run together (``[inf] t=...[inf] t=...``).
+
+    Complete segments are added as data. A cut-off segment is skipped with a warning
+    (``truncated_final`` when it ends the last non-blank line, else ``partial``).
+
+    Raises
+    ------
+    RigLogError
+        A segment with missing, unknown or out-of-order keys.
+    """
+    segments = [s for s in text.split("[inf] ")[1:] if s]
+    for j, seg in enumerate(segments):
+        seg_line = "[inf] " + seg
+        m = _DATA_RE.fullmatch(seg_line)
+        if m is not None:
+            scan.add_data(m.groups(), lineno)
+            continue
+        is_last = last_line and j == len(segments) - 1
+        kind, detail = _classify_malformed(seg_line)
+        if kind == "partial" and is_last:
+            scan.skipped["truncated_final"] += 1
+            eof = "" if scan.ends_with_newline else ", no newline at end of file"
+            scan.warnings.append(f"{scan.source}:{lineno}: truncated final line skipped "
+                                 f"({detail}{eof})")
+        elif kind == "partial":
+            scan.skipped["partial"] += 1
+            scan.warnings.append(f"{scan.source}:{lineno}: partial data line skipped "
+                                 f"({detail})")
+        else:
+            raise RigLogError(f"{scan.source}:{lineno}: malformed data line: {detail}: "
+                              f"{seg_line[:120]!r}")
+
+
+def _scan_line(scan: _LogScan, raw: str, i: int) -> None:
+    """Sort line ``i`` (0-based) into a data row, a run marker or event, or counted noise."""
+    lineno = i + 1
+    line = raw[:-1] if raw.endswith("\r") else raw
+    m = _DATA_RE.fullmatch(line)
+    if m is not None:
+        scan.add_data(m.groups(), lineno)
+        return
+    # Slow path: noise, or a data line wrapped in escape codes / carriage returns.
+    clean = _clean_terminal_line(line)
+    m = _DATA_RE.fullmatch(clean)
+    if m is not None:
+        scan.add_data(m.groups(), lineno)
+    elif not clean:
+        scan.skipped["empty"] += 1
+    elif clean.startswith("[obs]"):
+        scan.skipped["obs"] += 1
+    elif (pos := clean.find("[inf] t=")) >= 0:
+        _scan_data_segments(scan, clean[pos:], lineno, last_line=i == scan.last_nonempty)
+    elif clean.startswith("[inf]"):
+        scan.add_info(clean[len("[inf]"):].strip())
+    else:
+        scan.skipped["terminal"] += 1
+
+
+def _rows_to_array(rows: list[tuple[str, ...]], lines: list[int],
+                   source: str) -> NDArray[np.float64]:
+    """The rows as floats, shape (n, 8).
+
+    Raises
+    ------
+    RigLogError
+        A non-numeric value, naming its line and key.
+    """
+    try:
+        return np.array(rows, dtype=np.float64)
+    except ValueError:
+        for row, ln in zip(rows, lines, strict=True):
+            for key, val in zip(KEYS, row, strict=True):
+                _float_or_error(val, key, f"{source}:{ln}")
+        raise  # pragma: no cover - the loop above raises
+
+
+def _check_run_values(data: NDArray[np.float64], rows: list[tuple[str, ...]],
+                      lines: NDArray[np.int64], source: str) -> None:
+    """Check that all values are finite and time never goes backwards.
+
+    Raises
+    ------
+    RigLogError
+        The first non-finite value, or the first backwards step in ``t``, with its line.
+    """
+    bad = ~np.isfinite(data)
+    if bad.any():
+        r, c = np.argwhere(bad)[0]
+        raise RigLogError(f"{source}:{lines[r]}: non-finite value {KEYS[c]}="
+                          f"{rows[r][c]!r} ({int(bad.sum())} non-finite value(s) in "
+                          f"this run)")
+    t = data[:, 0]
+    back = np.nonzero(np.diff(t) < 0)[0]
+    if back.size:
+        k = int(back[0])
+        raise RigLogError(
+            f"{source}:{lines[k + 1]}: time goes backwards from t={float(t[k])!r} (line "
+            f"{lines[k]}) to t={float(t[k + 1])!r} without a restart marker "
+            f"('[inf] initializing hardware..')")
+
+
+def _finish_run(raw: _RunRows, source: str, duplicates: str) -> RigRun:
+    """Convert and check the rows of one run; drop repeated timestamps (or raise).
+
+    Raises
+    ------
+    RigLogError
+        A non-numeric or non-finite value, time going backwards or, with
+        ``duplicates="error"``, a repeated timestamp.
+    """
+    lines = np.asarray(raw.lines, dtype=np.int64)
+    data = _rows_to_array(raw.rows, raw.lines, source)
+    _check_run_values(data, raw.rows, lines, source)
+    t = data[:, 0]
+    dup = np.nonzero(np.diff(t) == 0)[0] + 1
+    if dup.size and duplicates == "error":
+        k = int(dup[0])
+        raise RigLogError(f"{source}:{lines[k]}: duplicate timestamp t={float(t[k])!r} "
+                          f"(same as "
+                          f"line {lines[k - 1]}); {dup.size} duplicate(s) in this run")
+    events = raw.events
+    if dup.size:
+        keep = np.ones(t.shape[0], bool)
+        keep[dup] = False
+        events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in events]
+        data, lines = data[keep], lines[keep]
+    return RigRun(data=data, lines=lines, events=events, dropped_duplicates=int(dup.size))
+
+
 def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
                        duplicates: str = "drop") -> RigLog:
     """Parse the text of a rig log.
@@ -248,136 +461,23 @@ def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()  # text ended with a newline
-    ends_with_newline = text.endswith("\n")
-    last_nonempty = max((i for i, ln in enumerate(lines) if ln.strip("\r \t")), default=-1)
-
-    skipped: Counter[str] = Counter()
-    warns: list[str] = []
-    runs_rows: list[list[tuple[str, ...]]] = [[]]
-    runs_lines: list[list[int]] = [[]]
-    runs_events: list[list[tuple[int, str]]] = [[]]
-    new_run_pending = False
-    fullmatch = _DATA_RE.fullmatch
-
-    def add_data(groups: tuple[str, ...], lineno: int) -> None:
-        nonlocal new_run_pending
-        if new_run_pending and runs_rows[-1]:
-            runs_rows.append([])
-            runs_lines.append([])
-            runs_events.append([])
-        new_run_pending = False
-        runs_rows[-1].append(groups)
-        runs_lines[-1].append(lineno)
-
+    scan = _LogScan(
+        source=source, ends_with_newline=text.endswith("\n"),
+        last_nonempty=max((i for i, ln in enumerate(lines) if ln.strip("\r \t")), default=-1))
     for i, raw in enumerate(lines):
-        lineno = i + 1
-        line = raw[:-1] if raw.endswith("\r") else raw
-        m = fullmatch(line)
-        if m is not None:
-            add_data(m.groups(), lineno)
-            continue
-        # Slow path: noise, or a data line wrapped in escape codes / carriage returns.
-        clean = _ANSI_RE.sub("", line)
-        if "\r" in clean:  # a carriage return: the text after it is what the terminal shows
-            tail = clean.rsplit("\r", 1)[-1]
-            clean = tail if tail.strip() else clean.replace("\r", "")
-        clean = _CTRL_RE.sub("", clean).strip()
-        m = fullmatch(clean)
-        if m is not None:
-            add_data(m.groups(), lineno)
-            continue
-        if not clean:
-            skipped["empty"] += 1
-            continue
-        if clean.startswith("[obs]"):
-            skipped["obs"] += 1
-            continue
-        pos = clean.find("[inf] t=")
-        if pos >= 0:
-            segments = [s for s in clean[pos:].split("[inf] ")[1:] if s]
-            for j, seg in enumerate(segments):
-                seg_line = "[inf] " + seg
-                m = fullmatch(seg_line)
-                if m is not None:
-                    add_data(m.groups(), lineno)
-                    continue
-                is_last = i == last_nonempty and j == len(segments) - 1
-                kind, detail = _classify_malformed(seg_line)
-                if kind == "partial" and is_last:
-                    skipped["truncated_final"] += 1
-                    msg = (f"{source}:{lineno}: truncated final line skipped ({detail}"
-                           f"{'' if ends_with_newline else ', no newline at end of file'})")
-                    warns.append(msg)
-                elif kind == "partial":
-                    skipped["partial"] += 1
-                    warns.append(f"{source}:{lineno}: partial data line skipped ({detail})")
-                else:
-                    raise RigLogError(f"{source}:{lineno}: malformed data line: {detail}: "
-                                      f"{seg_line[:120]!r}")
-            continue
-        if clean.startswith("[inf]"):
-            skipped["info"] += 1
-            msg = clean[len("[inf]"):].strip()
-            if msg.startswith("initializing hardware"):
-                new_run_pending = True
-            elif msg.startswith("stopped"):
-                new_run_pending = True
-            else:
-                runs_events[-1].append((len(runs_rows[-1]), msg))
-            continue
-        skipped["terminal"] += 1
+        _scan_line(scan, raw, i)
 
-    n_data = sum(len(r) for r in runs_rows)
+    n_data = sum(len(r.rows) for r in scan.runs)
     if n_data == 0:
-        counts = ", ".join(f"{k}: {v}" for k, v in sorted(skipped.items()) if v) or "none"
+        counts = ", ".join(f"{k}: {v}" for k, v in sorted(scan.skipped.items()) if v) or "none"
         raise RigLogError(f"{source}: no data lines ('[inf] t=...,torque=...,...') among "
                           f"{len(lines)} line(s); skipped {counts}")
-
-    runs: list[RigRun] = []
-    for rows, lns, run_events in zip(runs_rows, runs_lines, runs_events, strict=True):
-        events = run_events
-        if not rows:
-            continue
-        lnarr = np.asarray(lns, dtype=np.int64)
-        try:
-            data = np.array(rows, dtype=np.float64)
-        except ValueError:
-            for row, ln in zip(rows, lns, strict=True):
-                for key, val in zip(KEYS, row, strict=True):
-                    _float_or_error(val, key, f"{source}:{ln}")
-            raise  # pragma: no cover - the loop above raises
-        bad = ~np.isfinite(data)
-        if bad.any():
-            r, c = np.argwhere(bad)[0]
-            raise RigLogError(f"{source}:{lnarr[r]}: non-finite value {KEYS[c]}="
-                              f"{rows[r][c]!r} ({int(bad.sum())} non-finite value(s) in "
-                              f"this run)")
-        t = data[:, 0]
-        dt = np.diff(t)
-        back = np.nonzero(dt < 0)[0]
-        if back.size:
-            k = int(back[0])
-            raise RigLogError(
-                f"{source}:{lnarr[k + 1]}: time goes backwards from t={float(t[k])!r} (line "
-                f"{lnarr[k]}) to t={float(t[k + 1])!r} without a restart marker "
-                f"('[inf] initializing hardware..')")
-        dup = np.nonzero(dt == 0)[0] + 1
-        if dup.size and duplicates == "error":
-            k = int(dup[0])
-            raise RigLogError(f"{source}:{lnarr[k]}: duplicate timestamp t={float(t[k])!r} "
-                              f"(same as "
-                              f"line {lnarr[k - 1]}); {dup.size} duplicate(s) in this run")
-        if dup.size:
-            keep = np.ones(t.shape[0], bool)
-            keep[dup] = False
-            events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in events]
-            data, lnarr = data[keep], lnarr[keep]
-            skipped["duplicate_time"] += int(dup.size)
-        runs.append(RigRun(data=data, lines=lnarr, events=events,
-                           dropped_duplicates=int(dup.size)))
-    skipped_out = {k: v for k, v in skipped.items() if v}
+    runs = [_finish_run(r, source, duplicates) for r in scan.runs if r.rows]
+    for run in runs:
+        scan.skipped["duplicate_time"] += run.dropped_duplicates
+    skipped_out = {k: v for k, v in scan.skipped.items() if v}
     return RigLog(source=source, n_lines=len(lines), n_data=n_data, skipped=skipped_out,
-                  warnings=warns, runs=runs)
+                  warnings=scan.warnings, runs=runs)
 
 
 def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
@@ -447,6 +547,142 @@ def _camera_backlog_end(new_fix_idx: NDArray[np.intp], min_burst: int = 10,
     return int(new_fix_idx[j[0] + 1])
 
 
+@dataclass(frozen=True, kw_only=True)
+class _RigColumns:
+    """The columns of one raw run, copied, in the rig's conventions (see :data:`KEYS`)."""
+
+    t: NDArray[np.float64]
+    torque: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    phi: NDArray[np.float64]
+    dtheta: NDArray[np.float64]
+    dphi: NDArray[np.float64]
+    x: NDArray[np.float64]
+    y: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, run: RigRun) -> _RigColumns:
+        """Copies of the columns of ``run``."""
+        return cls(**{key: run.column(key).copy() for key in KEYS})
+
+
+@dataclass(frozen=True, kw_only=True)
+class _BallFixes:
+    """The camera fixes held in a run's ``x, y`` columns and which samples are valid.
+
+    Attributes
+    ----------
+    seen : ndarray of bool
+        A ball position is held (``x, y`` not both 0).
+    last_fix : ndarray of int
+        Index of the latest new fix at or before each sample (-1: none yet).
+    valid : ndarray of bool
+        The held fix is usable: not older than ``stale_after``, not in the start-up
+        backlog, not reported lost.
+    backlog_end : int
+        First sample after the start-up replay of queued camera frames (0: none).
+    """
+
+    seen: NDArray[np.bool_]
+    last_fix: NDArray[np.intp]
+    valid: NDArray[np.bool_]
+    backlog_end: int
+
+
+def _ball_lost(events: list[tuple[int, str]], fix_idx: NDArray[np.intp],
+               n: int) -> NDArray[np.bool_]:
+    """Samples from each ``ball was lost`` message up to (excluding) the next new fix."""
+    lost = np.zeros(n, bool)
+    for e, msg in events:
+        if msg.startswith("ball was lost") and e < n:
+            nxt = fix_idx[fix_idx >= e]
+            end = int(nxt[0]) if nxt.size else n
+            lost[e:end] = True
+    return lost
+
+
+def _ball_fixes(run: RigRun, raw: _RigColumns, *, stale_after: float, drop_backlog: bool,
+                notes: list[str]) -> _BallFixes:
+    """Find the new camera fixes of a run and the valid samples; explain them in ``notes``.
+
+    A new fix is a held position that differs from the previous sample's (or follows a
+    sample without a ball).
+    """
+    t, x, y = raw.t, raw.x, raw.y
+    n = t.shape[0]
+    idx = np.arange(n)
+    seen = ~((x == 0.0) & (y == 0.0))
+    changed = np.ones(n, bool)
+    changed[1:] = (x[1:] != x[:-1]) | (y[1:] != y[:-1]) | ~seen[:-1]
+    new_fix = seen & changed
+    fix_idx = np.nonzero(new_fix)[0]
+    backlog_end = _camera_backlog_end(fix_idx) if drop_backlog else 0
+    last_fix = np.maximum.accumulate(np.where(new_fix, idx, -1))
+    has_fix = last_fix >= 0
+    age = np.where(has_fix, t - t[np.maximum(last_fix, 0)], np.inf)
+    lost = _ball_lost(run.events, fix_idx, n)
+    valid = seen & has_fix & (age <= stale_after) & (idx >= backlog_end) & ~lost
+    if backlog_end > 0:
+        notes.append(f"camera backlog: fixes before t = {t[min(backlog_end, n - 1)]:.4f} s "
+                     f"arrived at the loop rate (frames queued since program start) and are "
+                     f"marked invalid")
+    if lost.any():
+        notes.append(f"'ball was lost' reported; {int(lost.sum())} held sample(s) invalid")
+    stale = seen & has_fix & (age > stale_after)
+    if stale.any():
+        notes.append(f"{int(stale.sum())} sample(s) hold a fix older than {stale_after} s: "
+                     f"invalid")
+    return _BallFixes(seen=seen, last_fix=last_fix, valid=valid, backlog_end=backlog_end)
+
+
+def _turn_shift(theta_raw: NDArray[np.float64], rebase_turns: bool,
+                conversions: list[str]) -> float:
+    """The whole turns ``2 pi k`` nearest to the first ``theta`` (0 unless ``rebase_turns``)."""
+    if not rebase_turns:
+        return 0.0
+    shift = 2.0 * math.pi * round(theta_raw[0] / (2.0 * math.pi))
+    if shift:
+        conversions.append(f"theta and phi rebased by -2 pi * {round(shift / (2 * math.pi))}"
+                           f" = {-shift!r} rad (whole turns; physically identical)")
+    return shift
+
+
+def _theta_resolution(theta_raw: NDArray[np.float64]) -> float:
+    """Resolution of the logged ``theta`` [rad] (6 significant digits of its largest value)."""
+    magnitude = float(np.max(np.abs(theta_raw)))
+    return 10.0 ** (math.floor(math.log10(magnitude)) - 5) if magnitude > 0 else 1e-6
+
+
+def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
+                  conversions: list[str], notes: list[str], shift: float, theta_res: float,
+                  backlog_end: int, phi_theta_lag: int, stale_after: float) -> dict[str, Any]:
+    """``Recording.meta`` of a converted run: provenance, conversions and rig conventions."""
+    n = t.shape[0]
+    return {
+        "source": source,
+        "source_kind": "ntnu_rig_log",
+        "conversions": conversions,
+        "notes": notes,
+        "units": {"phi_rig": "rad", "dphi_rig": "rad/s", "ball_seen": "-"},
+        "first_line": int(run.lines[0]),
+        "last_line": int(run.lines[-1]),
+        "dropped_duplicates": run.dropped_duplicates,
+        "events": [(float(t[min(e, n - 1)]), msg) for e, msg in run.events],
+        "theta_turn_shift": shift,
+        "theta_resolution": theta_res,
+        "camera_backlog_end_t": float(t[min(backlog_end, n - 1)]) if backlog_end else None,
+        "rig_conventions": {
+            "theta_sign": 1,
+            "torque_sign": 1,
+            "xy_frame": "world",
+            "phi_theta_lag_samples": int(phi_theta_lag),
+            "dtheta_delay_s": RIG_DTHETA_DELAY_S,
+            "stale_after_s": float(stale_after),
+            "doc": "docs/ntnu-rig-conventions.md",
+        },
+    }
+
+
 def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bool = True,
                      stale_after: float = 0.1,
                      phi_theta_lag: int = RIG_PHI_THETA_LAG_SAMPLES,
@@ -475,98 +711,42 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     drop_backlog : bool
         Mark the start-up replay of queued camera frames invalid.
     """
-    d = run.data
-    t = d[:, 0].copy()
-    torque, theta_raw, phi_rig, dtheta, dphi, x, y = (d[:, k].copy() for k in range(1, 8))
-    n = t.shape[0]
-    idx = np.arange(n)
-    seen = ~((x == 0.0) & (y == 0.0))
-    changed = np.ones(n, bool)
-    changed[1:] = (x[1:] != x[:-1]) | (y[1:] != y[:-1]) | ~seen[:-1]
-    new_fix = seen & changed
-    fix_idx = np.nonzero(new_fix)[0]
+    raw = _RigColumns.of(run)
     conversions: list[str] = []
     notes: list[str] = []
-
-    backlog_end = _camera_backlog_end(fix_idx) if drop_backlog else 0
-    last_fix = np.maximum.accumulate(np.where(new_fix, idx, -1))
-    has_fix = last_fix >= 0
-    age = np.where(has_fix, t - t[np.maximum(last_fix, 0)], np.inf)
-    valid = seen & has_fix & (age <= stale_after) & (idx >= backlog_end)
-    lost = np.zeros(n, bool)
-    for e, msg in run.events:
-        if msg.startswith("ball was lost") and e < n:
-            nxt = fix_idx[fix_idx >= e]
-            end = int(nxt[0]) if nxt.size else n
-            lost[e:end] = True
-    valid &= ~lost
-    if backlog_end > 0:
-        notes.append(f"camera backlog: fixes before t = {t[min(backlog_end, n - 1)]:.4f} s "
-                     f"arrived at the loop rate (frames queued since program start) and are "
-                     f"marked invalid")
-    if lost.any():
-        notes.append(f"'ball was lost' reported; {int(lost.sum())} held sample(s) invalid")
-    stale = seen & has_fix & (age > stale_after)
-    if stale.any():
-        notes.append(f"{int(stale.sum())} sample(s) hold a fix older than {stale_after} s: "
-                     f"invalid")
+    fixes = _ball_fixes(run, raw, stale_after=stale_after, drop_backlog=drop_backlog,
+                        notes=notes)
 
     cx, cy = float(camera_offset[0]), float(camera_offset[1])
-    bx, by = x - cx, y - cy
+    bx, by = raw.x - cx, raw.y - cy
     if cx or cy:
         conversions.append(f"subtracted camera offset (cx, cy) = ({cx}, {cy}) m from x, y")
+    shift = _turn_shift(raw.theta, rebase_turns, conversions)
+    theta = raw.theta - shift
 
-    shift = 0.0
-    if rebase_turns:
-        shift = 2.0 * math.pi * round(theta_raw[0] / (2.0 * math.pi))
-        if shift:
-            conversions.append(f"theta and phi rebased by -2 pi * {round(shift / (2 * math.pi))}"
-                               f" = {-shift!r} rad (whole turns; physically identical)")
-    theta = theta_raw - shift
-
-    lag_src = np.maximum(idx - int(phi_theta_lag), 0)
+    lag_src = np.maximum(np.arange(raw.t.shape[0]) - int(phi_theta_lag), 0)
     phi_fix = theta[lag_src] + np.arctan2(bx, by)
-    phi = np.where(valid, phi_fix[np.maximum(last_fix, 0)], np.nan)
+    phi = np.where(fixes.valid, phi_fix[np.maximum(fixes.last_fix, 0)], np.nan)
     conversions.append(f"phi recomputed as theta[k - {phi_theta_lag}] + atan2(x, y) at each "
                        f"new fix k and held (the rig's own pairing); rig phi kept in "
                        f"extra['phi_rig']")
-    phi_rig_ours = np.where(seen, phi_rig - shift, np.nan)
+    phi_rig_ours = np.where(fixes.seen, raw.phi - shift, np.nan)
     initialised = np.abs(phi_rig_ours - phi) < 0.5
-    phi_dot = np.where(valid & initialised, dphi, np.nan)
+    phi_dot = np.where(fixes.valid & initialised, raw.dphi, np.nan)
     conversions.append("phi_dot = rig dphi where the ball is valid and the rig's phi "
                        "estimator is initialised, else NaN")
     conversions.append("theta, theta_dot (rig dtheta), torque, x, y: rig sign and units "
                        "already match ours (no change)")
 
-    magnitude = float(np.max(np.abs(theta_raw)))
-    theta_res = 10.0 ** (math.floor(math.log10(magnitude)) - 5) if magnitude > 0 else 1e-6
     rec = Recording(
-        t=t, theta=theta, theta_dot=dtheta, torque=torque, ball_x=bx, ball_y=by,
-        ball_valid=valid, phi=phi, phi_dot=phi_dot,
-        extra={"phi_rig": phi_rig_ours, "dphi_rig": dphi, "ball_seen": seen.astype(float)},
-        meta={
-            "source": source,
-            "source_kind": "ntnu_rig_log",
-            "conversions": conversions,
-            "notes": notes,
-            "units": {"phi_rig": "rad", "dphi_rig": "rad/s", "ball_seen": "-"},
-            "first_line": int(run.lines[0]),
-            "last_line": int(run.lines[-1]),
-            "dropped_duplicates": run.dropped_duplicates,
-            "events": [(float(t[min(e, n - 1)]), msg) for e, msg in run.events],
-            "theta_turn_shift": shift,
-            "theta_resolution": theta_res,
-            "camera_backlog_end_t": float(t[min(backlog_end, n - 1)]) if backlog_end else None,
-            "rig_conventions": {
-                "theta_sign": 1,
-                "torque_sign": 1,
-                "xy_frame": "world",
-                "phi_theta_lag_samples": int(phi_theta_lag),
-                "dtheta_delay_s": RIG_DTHETA_DELAY_S,
-                "stale_after_s": float(stale_after),
-                "doc": "docs/ntnu-rig-conventions.md",
-            },
-        },
+        t=raw.t, theta=theta, theta_dot=raw.dtheta, torque=raw.torque, ball_x=bx, ball_y=by,
+        ball_valid=fixes.valid, phi=phi, phi_dot=phi_dot,
+        extra={"phi_rig": phi_rig_ours, "dphi_rig": raw.dphi,
+               "ball_seen": fixes.seen.astype(float)},
+        meta=_rig_log_meta(run, raw.t, source=source, conversions=conversions, notes=notes,
+                           shift=shift, theta_res=_theta_resolution(raw.theta),
+                           backlog_end=fixes.backlog_end, phi_theta_lag=phi_theta_lag,
+                           stale_after=stale_after),
     )
     rec.meta["sample_rate"] = rec.sample_rate()
     rec.meta["camera_fix_rate"] = rec.camera_fix_rate()

@@ -2,8 +2,7 @@
 
 The analyses take a :class:`Trajectory` (``t, theta, phi, theta_dot, phi_dot, u``), so they
 work on open-loop runs, recordings or closed-loop runs alike. The closed loops use the
-controller of ``bfr_control`` (imported when called: bfr_control sits above bfr_sim in the
-dependency order, and only these run-time helpers need it):
+node suite's controller (``bfr_control``):
 
 - :func:`closed_loop_rigid`: ``bfr_sim.closed_loop.run_closed_loop`` (rigid plant);
 - :func:`closed_loop_contact`: the same controller, camera model and control rate against the

@@ -46,6 +46,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -54,7 +55,7 @@ from bfr_control.estimator import BallObservation
 from bfr_model.contact import ITH, ITHD, IX, IY
 from bfr_model.dynamics import RigidModel, rigid_rhs
 from bfr_model.layout import I_R
-from bfr_model.params import load_params
+from bfr_model.params import RigParams, load_params
 from bfr_model.perturbations import bump_row, load_study, with_asperities
 from bfr_sim.closed_loop import orbit_initial_state, run_closed_loop
 from bfr_sim.simulator_node import RigSimulation
@@ -74,6 +75,7 @@ __all__ = ["SPECS", "run"]
 
 _DT = 1e-3           # [s] RK4 step of the node
 _CHUNK = 5           # steps per 200 Hz camera frame
+_CHUNK_S = _CHUNK * _DT  # [s] one camera frame
 _RTOLS = tuple(10.0 ** -k for k in range(3, 13))
 
 SPECS: list[FigureSpec] = [
@@ -132,52 +134,124 @@ def _solve(rhs: Callable, x0: np.ndarray, span: float, args: tuple, method: str,
     return sol
 
 
-def _calibrate(errors_of: Callable[[float], float], target: float) -> tuple[float, float, bool]:
-    """Loosest rtol of :data:`_RTOLS` whose error <= target: (rtol, error, matched)."""
+@dataclass(frozen=True, kw_only=True)
+class _Tolerance:
+    """A solve_ivp tolerance matched to RK4's error.
+
+    Attributes
+    ----------
+    rtol : float
+        ``rtol = atol`` chosen: the loosest of :data:`_RTOLS` whose error is small enough.
+    error : float
+        Its error.
+    matched : bool
+        False if even the tightest tried was not accurate enough (then it is that one).
+    """
+
+    rtol: float
+    error: float
+    matched: bool
+
+    @property
+    def unmatched_note(self) -> str:
+        """``""`` if matched, else the note that says it was not."""
+        return "" if self.matched else ": NOT matched"
+
+
+def _calibrate(errors_of: Callable[[float], float], target: float) -> _Tolerance:
+    """Loosest rtol of :data:`_RTOLS` whose error <= target."""
     err = math.inf
     rtol = _RTOLS[-1]
     for rtol in _RTOLS:
         err = errors_of(rtol)
         if err <= target:
-            return rtol, err, True
-    return rtol, err, False
+            return _Tolerance(rtol=rtol, error=err, matched=True)
+    return _Tolerance(rtol=rtol, error=err, matched=False)
 
 
-def _rigid(opts: BenchOptions, say: Progress) -> list[Figure]:
+@dataclass(frozen=True, kw_only=True)
+class _RigidTrajectory:
+    """The rigid benchmark's trajectory: a closed-loop run, its torque held per 5 ms chunk.
 
-    horizon = 1.0 if opts.quick else 10.0
-    repeats = opts.repeats
-    say(f"sim: rigid model, closed-loop reference run of {horizon:g} s")
+    Attributes
+    ----------
+    params : RigParams
+        rig.yaml.
+    model : RigidModel
+        The plant (compiled kernel loaded).
+    x : ndarray, shape (n + 1, 6)
+        The run's states at the chunk starts.
+    u : ndarray, shape (n + 1,)
+        The torque held over each chunk [N m].
+    n : int
+        Chunks of 5 ms.
+    """
+
+    params: RigParams
+    model: RigidModel
+    x: np.ndarray
+    u: np.ndarray
+    n: int
+
+    @property
+    def duration(self) -> float:
+        """Simulated time of the n chunks [s]."""
+        return self.n * _CHUNK * _DT
+
+
+@dataclass(frozen=True, kw_only=True)
+class _Accuracy:
+    """RK4's error at 1 kHz against a fine reference, and the solve_ivp tolerances matching it.
+
+    Attributes
+    ----------
+    rk4_error : float
+        Largest state error of RK4 at 1 kHz.
+    tolerances : dict of str to _Tolerance
+        By solve_ivp method (``RK45``, ``DOP853``).
+    """
+
+    rk4_error: float
+    tolerances: dict[str, _Tolerance]
+
+
+def _rigid_trajectory(horizon: float) -> _RigidTrajectory:
+    """The closed-loop reference run of ``horizon`` [s] as the trajectory to replay."""
     params, lr, _ = _reference_run(horizon)
     model = RigidModel(params)
-    X, U = lr.x, lr.u
-    n = X.shape[0] - 1                   # chunks of 5 ms
-    T = n * _CHUNK * _DT                 # simulated time [s]
-    model.step(X[0], 0.0, _DT, 1)        # load the compiled kernel
-    chunk = _CHUNK * _DT
+    model.step(lr.x[0], 0.0, _DT, 1)        # load the compiled kernel
+    return _RigidTrajectory(params=params, model=model, x=lr.x, u=lr.u, n=lr.x.shape[0] - 1)
 
-    # accuracy: per-chunk error over the first second against RK4 at 10 us
-    ncal = min(n, 50 if opts.quick else 200)
-    ref = np.array([model.step(X[k], U[k], 1e-5, round(chunk / 1e-5)) for k in range(ncal)])
+
+def _chunk_accuracy(tr: _RigidTrajectory, quick: bool, say: Progress) -> _Accuracy:
+    """Per-chunk state error over the first second against RK4 at 10 us; matched tolerances."""
+    model, X, U = tr.model, tr.x, tr.u
+    ncal = min(tr.n, 50 if quick else 200)
+    ref = np.array([model.step(X[k], U[k], 1e-5, round(_CHUNK_S / 1e-5)) for k in range(ncal)])
     ours = np.array([model.step(X[k], U[k], _DT, _CHUNK) for k in range(ncal)])
     err_rk4 = float(np.max(np.abs(ours[:, :4] - ref[:, :4])))
 
     def chunk_error(method: str) -> Callable[[float], float]:
         def f(rtol: float) -> float:
-            xs = np.array([_solve(rigid_rhs, X[k], chunk, model.rhs_args(U[k]), method, rtol,
-                                  rtol).y[:, -1] for k in range(ncal)])
+            xs = np.array([_solve(rigid_rhs, X[k], _CHUNK_S, model.rhs_args(U[k]), method,
+                                  rtol, rtol).y[:, -1] for k in range(ncal)])
             return float(np.max(np.abs(xs[:, :4] - ref[:, :4])))
         return f
 
-    tol_chunk = {}
+    tols = {}
     for method in ("RK45", "DOP853"):
-        tol_chunk[method] = _calibrate(chunk_error(method), err_rk4)
-        r, e, ok = tol_chunk[method]
-        say(f"sim: {method} per 5 ms chunk: rtol = atol = {r:g} (error {e:.1e}, RK4 "
-            f"{err_rk4:.1e}{'' if ok else ', NOT matched: tightest tried'})")
+        tol = tols[method] = _calibrate(chunk_error(method), err_rk4)
+        say(f"sim: {method} per 5 ms chunk: rtol = atol = {tol.rtol:g} (error {tol.error:.1e}, "
+            f"RK4 {err_rk4:.1e}{'' if tol.matched else ', NOT matched: tightest tried'})")
+    return _Accuracy(rk4_error=err_rk4, tolerances=tols)
 
-    # long-call accuracy over the first second (u = 0 from the same start)
-    x0 = X[0].copy()
+
+def _long_accuracy(tr: _RigidTrajectory, say: Progress) -> _Accuracy:
+    """One long call's error over the first second against RK4 at 10 us; matched tolerances.
+
+    The long call starts from the run's first state with u = 0; errors are sampled every 1 ms.
+    """
+    model, x0 = tr.model, tr.x[0].copy()
     t_cal = np.arange(1, 1001) * _DT
     ref_long = np.empty((t_cal.size, 6))
     xr = x0.copy()
@@ -189,7 +263,7 @@ def _rigid(opts: BenchOptions, say: Progress) -> list[Figure]:
     for i in range(t_cal.size):
         xk = model.step(xk, 0.0, _DT, 1)
         ours_long[i] = xk
-    err_rk4_long = float(np.max(np.abs(ours_long[:, :4] - ref_long[:, :4])))
+    err_rk4 = float(np.max(np.abs(ours_long[:, :4] - ref_long[:, :4])))
 
     def long_error(method: str) -> Callable[[float], float]:
         def f(rtol: float) -> float:
@@ -198,14 +272,21 @@ def _rigid(opts: BenchOptions, say: Progress) -> list[Figure]:
             return float(np.max(np.abs(sol.y[:4].T - ref_long[:, :4])))
         return f
 
-    tol_long = {}
+    tols = {}
     for method in ("RK45", "DOP853"):
-        tol_long[method] = _calibrate(long_error(method), err_rk4_long)
-        r, e, ok = tol_long[method]
-        say(f"sim: {method} one call: rtol = atol = {r:g} (error over 1 s {e:.1e}, RK4 "
-            f"{err_rk4_long:.1e}{'' if ok else ', NOT matched: tightest tried'})")
+        tol = tols[method] = _calibrate(long_error(method), err_rk4)
+        say(f"sim: {method} one call: rtol = atol = {tol.rtol:g} (error over 1 s "
+            f"{tol.error:.1e}, RK4 {err_rk4:.1e}"
+            f"{'' if tol.matched else ', NOT matched: tightest tried'})")
+    return _Accuracy(rk4_error=err_rk4, tolerances=tols)
 
-    cmd_lists = [[float(u)] for u in U[:n]]
+
+def _rigid_runs(tr: _RigidTrajectory, chunked_acc: _Accuracy, long_acc: _Accuracy
+                ) -> dict[str, Callable[[int], None]]:
+    """The timed integrations, by figure key; each simulates its first ``m`` chunks."""
+    params, model, X, U = tr.params, tr.model, tr.x, tr.u
+    x0 = X[0].copy()
+    cmd_lists = [[float(u)] for u in U[:tr.n]]
 
     def node_loop(m: int) -> None:
         sim = RigSimulation(params, X[0, :4], _DT, 0.1)
@@ -220,37 +301,47 @@ def _rigid(opts: BenchOptions, say: Progress) -> list[Figure]:
             x = model.step(x, U[k], _DT, _CHUNK)
 
     def ivp_chunked(method: str) -> Callable[[int], None]:
-        rtol = tol_chunk[method][0]
+        rtol = chunked_acc.tolerances[method].rtol
 
         def f(m: int) -> None:
             for k in range(m):
-                _solve(rigid_rhs, X[k], chunk, model.rhs_args(U[k]), method, rtol, rtol)
+                _solve(rigid_rhs, X[k], _CHUNK_S, model.rhs_args(U[k]), method, rtol, rtol)
         return f
 
     def compiled(m: int) -> None:
         model.step(x0, 0.0, _DT, m * _CHUNK)
 
     def ivp_long(method: str) -> Callable[[int], None]:
-        rtol = tol_long[method][0]
+        rtol = long_acc.tolerances[method].rtol
 
         def f(m: int) -> None:
-            _solve(rigid_rhs, x0, m * chunk, model.rhs_args(0.0), method, rtol, rtol)
+            _solve(rigid_rhs, x0, m * _CHUNK_S, model.rhs_args(0.0), method, rtol, rtol)
         return f
 
-    runs: dict[str, Callable[[int], None]] = {
-        "chunked": chunked, "rk45c": ivp_chunked("RK45"), "dop853c": ivp_chunked("DOP853"),
-        "compiled": compiled, "rk45l": ivp_long("RK45"), "dop853l": ivp_long("DOP853")}
-    runs = {"node": node_loop, **runs}
+    return {"node": node_loop, "chunked": chunked, "rk45c": ivp_chunked("RK45"),
+            "dop853c": ivp_chunked("DOP853"), "compiled": compiled,
+            "rk45l": ivp_long("RK45"), "dop853l": ivp_long("DOP853")}
+
+
+def _time_runs(runs: dict[str, Callable[[int], None]], tr: _RigidTrajectory, repeats: int,
+               say: Progress) -> dict[str, list[float]]:
+    """Real-time factors of each run over the whole trajectory, per repeat (after a warm-up)."""
     v: dict[str, list[float]] = {k: [] for k in runs}
     for f in runs.values():  # warm-up (kernels loaded, caches warm), not timed
-        f(min(n, 40))
+        f(min(tr.n, 40))
     for rep in range(repeats):
         say(f"sim: rigid model, repeat {rep + 1}/{repeats}")
         for key, f in runs.items():
             t0 = time.perf_counter()
-            f(n)
-            v[key].append(T / (time.perf_counter() - t0))
+            f(tr.n)
+            v[key].append(tr.duration / (time.perf_counter() - t0))
+    return v
 
+
+def _rigid_figures(v: dict[str, list[float]], tr: _RigidTrajectory, chunked_acc: _Accuracy,
+                   long_acc: _Accuracy, repeats: int) -> list[Figure]:
+    """The ``sim.rigid_*`` figures from the timed real-time factors ``v``."""
+    T, err_rk4, err_rk4_long = tr.duration, chunked_acc.rk4_error, long_acc.rk4_error
     traj = (f"closed-loop trajectory on the orbit, {T:g} s, torque held per 5 ms; "
             f"{repeats} repeat(s)")
     figs = []
@@ -260,34 +351,45 @@ def _rigid(opts: BenchOptions, say: Progress) -> list[Figure]:
                      f"RigidModel.step(x, u, 1 ms, 5) per camera frame; {traj}; per-chunk "
                      f"error vs RK4 at 10 us {err_rk4:.1e}", error=err_rk4))
     for key, method, short in (("rk45c", "RK45", "rk45"), ("dop853c", "DOP853", "dop853")):
-        r, e, ok = tol_chunk[method]
+        tol = chunked_acc.tolerances[method]
         figs.append(_fig(f"sim.rigid_rtf_{short}_chunked", v[key],
-                         f"rtol = atol = {r:g}, loosest with per-chunk error <= RK4's "
-                         f"({e:.1e} vs {err_rk4:.1e}{'' if ok else ': NOT matched'}); "
+                         f"rtol = atol = {tol.rtol:g}, loosest with per-chunk error <= RK4's "
+                         f"({tol.error:.1e} vs {err_rk4:.1e}{tol.unmatched_note}); "
                          f"compiled rigid_rhs through a Python wrapper; restarted each 5 ms",
-                         rtol=r, atol=r, error=e, matched=ok))
+                         rtol=tol.rtol, atol=tol.rtol, error=tol.error, matched=tol.matched))
     for key, method, short in (("rk45c", "RK45", "rk45"), ("dop853c", "DOP853", "dop853")):
         ratios = [a / b for a, b in zip(v["chunked"], v[key], strict=True)]
         figs.append(_fig(f"sim.rigid_ratio_{short}_chunked", ratios,
                          f"RTF ratio within each repeat, same trajectory, same accuracy "
-                         f"({method} rtol {tol_chunk[method][0]:g})"))
+                         f"({method} rtol {chunked_acc.tolerances[method].rtol:g})"))
     figs.append(_fig("sim.rigid_rtf_compiled", v["compiled"],
                      f"model.step(x0, 0, 1 ms, {round(T / _DT)}), u = 0 from the same start; "
                      f"error over 1 s vs RK4 at 10 us {err_rk4_long:.1e}",
                      error=err_rk4_long))
     for key, method, short in (("rk45l", "RK45", "rk45"), ("dop853l", "DOP853", "dop853")):
-        r, e, ok = tol_long[method]
+        tol = long_acc.tolerances[method]
         figs.append(_fig(f"sim.rigid_rtf_{short}_long", v[key],
-                         f"one solve_ivp call over {T:g} s, u = 0; rtol = atol = {r:g} "
-                         f"(error over 1 s {e:.1e} vs RK4 {err_rk4_long:.1e}"
-                         f"{'' if ok else ': NOT matched'})", rtol=r, atol=r, error=e,
-                         matched=ok))
+                         f"one solve_ivp call over {T:g} s, u = 0; rtol = atol = {tol.rtol:g} "
+                         f"(error over 1 s {tol.error:.1e} vs RK4 {err_rk4_long:.1e}"
+                         f"{tol.unmatched_note})", rtol=tol.rtol, atol=tol.rtol,
+                         error=tol.error, matched=tol.matched))
     best = [max(a, b) for a, b in zip(v["rk45l"], v["dop853l"], strict=True)]
     figs.append(_fig("sim.rigid_ratio_long",
                      [a / b for a, b in zip(v["compiled"], best, strict=True)],
                      "one long compiled RK4 call / the faster of RK45 and DOP853 (one call), "
                      "within each repeat"))
     return figs
+
+
+def _rigid(opts: BenchOptions, say: Progress) -> list[Figure]:
+    """The rigid model's figures (module docstring): trajectory, accuracy, timing."""
+    horizon = 1.0 if opts.quick else 10.0
+    say(f"sim: rigid model, closed-loop reference run of {horizon:g} s")
+    tr = _rigid_trajectory(horizon)
+    chunked_acc = _chunk_accuracy(tr, opts.quick, say)
+    long_acc = _long_accuracy(tr, say)
+    v = _time_runs(_rigid_runs(tr, chunked_acc, long_acc), tr, opts.repeats, say)
+    return _rigid_figures(v, tr, chunked_acc, long_acc, opts.repeats)
 
 
 # -- contact model -------------------------------------------------------------------------------
@@ -473,7 +575,7 @@ def _contact_baselines(opts: BenchOptions, say: Progress, p_row: Any, ts: float,
 
     # below ~1e-12 m/s the errors are round-off (free flight between bumps): no target there
     target = max(ours_err, 1e-12)
-    tols: dict[str, tuple[float, float, bool]] = {}
+    tols: dict[str, _Tolerance] = {}
     grid = tuple(10.0 ** -k for k in range(3, 10))
     for method in ("LSODA", "Radau"):
         err = math.inf
@@ -485,7 +587,7 @@ def _contact_baselines(opts: BenchOptions, say: Progress, p_row: Any, ts: float,
             if err <= target:
                 ok = True
                 break
-        tols[method] = (rtol, err, ok)
+        tols[method] = _Tolerance(rtol=rtol, error=err, matched=ok)
         say(f"sim: contact {method}: rtol = {rtol:g}, atol = {rtol * 1e-3:g} (velocity error "
             f"{err:.1e} m/s, RK4 {ours_err:.1e}{'' if ok else ', NOT matched: tightest tried'})")
     v: dict[str, list[float]] = {"ours": [], "LSODA": [], "Radau": []}
@@ -503,11 +605,11 @@ def _contact_baselines(opts: BenchOptions, say: Progress, p_row: Any, ts: float,
         for method in ("LSODA", "Radau"):
             t0 = time.perf_counter()
             for k in ks:
-                integrate(int(k), method, tols[method][0])
+                integrate(int(k), method, tols[method].rtol)
             v[method].append(span / (time.perf_counter() - t0))
     figs = []
     for method in ("LSODA", "Radau"):
-        r, e, ok = tols[method]
+        r, e, ok = tols[method].rtol, tols[method].error, tols[method].matched
         figs.append(_fig(f"sim.contact_rtf_{method.lower()}", v[method],
                          f"{ks.size} intervals of 1 ms on the row from the run's states; "
                          f"rtol {r:g}, atol {r * 1e-3:g}: loosest with velocity error <= the "
