@@ -2,22 +2,33 @@
 
 A thin node over :class:`bfr_camera.detector.BallDetector`:
 
-- subscribes ``camera/image_raw`` (``sensor_msgs/Image``; mono8, mono16, 32FC1 or colour;
-  sensor-data QoS), ``camera/camera_info`` (the intrinsics, which replace those of
-  ``camera.*`` when ``input.use_camera_info``) and ``joint_states`` (the frame angle theta,
-  interpolated at each frame's exposure mid-time from a short buffer, for the observation's
-  ``phi = theta + atan2(x, y)``);
+- subscribes ``camera/image_raw`` (``sensor_msgs/Image``; mono8, mono16, 32FC1 or colour),
+  ``camera/camera_info`` (the intrinsics: size, K, D, distortion model) and
+  ``joint_states`` (the frame angle theta, interpolated at each frame's exposure mid-time
+  from a short buffer, for the observation's ``phi = theta + atan2(x, y)``); images and
+  camera_info with sensor-data QoS keeping the newest message only (best effort, keep last
+  1: after a stall the node measures the present image, it never works through a backlog);
 - publishes one ``ball_observation`` (``bfr_interfaces/BallObservation``, reliable) per
-  image, stamped with the image's stamp (the exposure mid-time). The detector keeps the last
-  fix and searches a region of interest around it first.
+  image it measures, stamped with the image's stamp (the exposure mid-time). The detector
+  keeps the last fix and searches a region of interest around it first.
+
+Calibration. With ``input.use_camera_info: true`` (the default) the node measures nothing
+until the first valid ``camera_info`` has arrived: an image before it gives an
+``INVALID_INPUT`` observation ("waiting for camera_info"), never a fix computed with
+another camera's intrinsics. With ``false`` it uses ``camera.*`` (k, d, size) from its
+parameters and ignores camera_info. It logs which calibration it uses, and again when a
+camera_info changes it. The camera's pose and timing (``camera.position``,
+``camera.orientation``, ``camera.exposure_time``) always come from the parameters
+(docs/hardware.md).
 
 Bad input never stops the node: an image it cannot use (encoding, size, step, a size that
 does not match the calibration, a non-finite theta) gives an observation with status
 ``INVALID_INPUT`` and a throttled warning that says why; no ball gives ``NOT_FOUND``;
-several give ``AMBIGUOUS``; no image for ``input.frame_timeout`` seconds (wall time) gives
-an ``INVALID_INPUT`` observation stamped now and a warning. When no current joint_states
-sample covers a frame, the ball's position is still reported (valid) with ``phi`` and
-``theta_used`` NaN.
+several give ``AMBIGUOUS``; no image for ``input.frame_timeout`` seconds of the node's clock
+(simulated time under ``use_sim_time``) gives an ``INVALID_INPUT`` observation stamped now
+and a warning. When no current joint_states sample covers a frame, the ball's position is
+still reported (valid) with ``phi`` and ``theta_used`` NaN. Log messages name the topics as
+resolved (remapping and namespace applied).
 """
 
 from __future__ import annotations
@@ -31,17 +42,18 @@ from typing import Any
 from bfr_model.param_file import check, config_path
 from bfr_model.params import default_params_path
 from bfr_ros.node_common import (
-    IMAGE_QOS,
+    IMAGE_SUB_QOS,
     JOINT_STATES_QOS,
     STATE_QOS,
     declare_parameter_tree,
+    flatten,
+    format_published,
     image_to_array,
     load_yaml_parameters,
     read_parameter_tree,
     run_node,
     stamp_to_ns,
 )
-from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
 
@@ -65,6 +77,11 @@ def node_defaults() -> dict[str, Any]:
     d["ball"] = {"radius": float(load_yaml_parameters(default_params_path())["ball"]["radius"])}
     d.update(load_yaml_parameters(config_path("bfr_camera", "camera_node.yaml")))
     return d
+
+
+def accepted_parameters() -> set[str]:
+    """Names the node accepts without using them: the rest of rig.yaml (for ``ball.radius``)."""
+    return set(flatten(load_yaml_parameters(default_params_path())))
 
 
 class ThetaBuffer:
@@ -123,7 +140,7 @@ class CameraNode(Node):
     def __init__(self) -> None:
         super().__init__("camera")
         self.defaults = node_defaults()
-        declare_parameter_tree(self, self.defaults)
+        declare_parameter_tree(self, self.defaults, accepted_parameters())
         p = read_parameter_tree(self, self.defaults)
         self.camera_params = dict(p["camera"])
         self.camera: CameraModel = camera_from_dict(self.camera_params)
@@ -138,26 +155,45 @@ class CameraNode(Node):
         self.joint_name = str(inp["joint_name"])
         self.theta = ThetaBuffer(float(inp["theta_max_gap"]))
         self.frame_timeout = float(inp["frame_timeout"])
+        check(self.frame_timeout > 0, "input.frame_timeout",
+              f"must be > 0 s, got {self.frame_timeout}")
         self.obs_pub = self.create_publisher(BallObservation, "ball_observation", STATE_QOS)
-        self.create_subscription(Image, "camera/image_raw", self._on_image, IMAGE_QOS)
-        self.create_subscription(CameraInfo, "camera/camera_info", self._on_info, IMAGE_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_joints, JOINT_STATES_QOS)
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(max(self.frame_timeout / 4.0, 0.05), self._watchdog, clock=self._steady)
-        self.last_image_wall = time.monotonic()
+        self.image_sub = self.create_subscription(Image, "camera/image_raw", self._on_image,
+                                                  IMAGE_SUB_QOS)
+        self.info_sub = self.create_subscription(CameraInfo, "camera/camera_info",
+                                                 self._on_info, IMAGE_SUB_QOS)
+        self.js_sub = self.create_subscription(JointState, "joint_states", self._on_joints,
+                                               JOINT_STATES_QOS)
+        # timeouts on the node's clock: simulated time under use_sim_time
+        self.create_timer(max(self.frame_timeout / 4.0, 0.05), self._watchdog)
+        self.started_ns = self.get_clock().now().nanoseconds
+        self.last_image_ns = self.started_ns
+        self.calibrated = not self.use_camera_info
+        self.waiting_logged = False
         self.missing = False
         self.last_status: int | None = None
         self.last_reason = ""
         self.last_theta_problem = ""
         self.info_key: tuple | None = None
         self.stats = {"frames": 0, "found": 0, "not_found": 0, "ambiguous": 0, "invalid": 0,
-                      "missing": 0, "time": 0.0}
+                      "missing": 0, "uncalibrated": 0, "published": 0, "time": 0.0}
         self.executor_ref: Any = None
+        if self.use_camera_info:
+            calib = (f"calibration: waiting for camera_info on {self.info_sub.topic_name} "
+                     f"(no image is measured before it)")
+        else:
+            calib = (f"calibration: parameters camera.* ({self._describe(self.camera)}; "
+                     f"input.use_camera_info false: {self.info_sub.topic_name} ignored)")
         self.get_logger().info(
-            f"camera: {self.camera.width}x{self.camera.height}, ball radius "
-            f"{1e3 * self.ball_radius:.1f} mm ({self.detector.expected_radius_px:.1f} px), "
-            f"ROI {'on' if self.detector_config.use_roi else 'off'}, camera_info "
-            f"{'used' if self.use_camera_info else 'ignored'}")
+            f"camera: images {self.image_sub.topic_name}, ball radius "
+            f"{1e3 * self.ball_radius:.1f} mm, ROI "
+            f"{'on' if self.detector_config.use_roi else 'off'}, pose "
+            f"{[round(v, 4) for v in self.camera_params['position']]} m; {calib}")
+
+    @staticmethod
+    def _describe(cam: CameraModel) -> str:
+        return (f"{cam.width}x{cam.height}, fx {cam.fx:.1f} fy {cam.fy:.1f} px, "
+                f"{cam.distortion_model} d {[round(float(v), 4) for v in cam.d]}")
 
     # -- inputs ----------------------------------------------------------------------------
     def _on_joints(self, msg: JointState) -> None:
@@ -191,19 +227,28 @@ class CameraNode(Node):
             self.get_logger().error(f"camera_info rejected, keeping the previous calibration: "
                                     f"{exc}")
             return
+        first = not self.calibrated
         self.camera, self.detector = cam, det
-        self.get_logger().info(f"calibration from camera_info: {cam.width}x{cam.height}, "
-                               f"fx {cam.fx:.1f} fy {cam.fy:.1f} px, {cam.distortion_model}")
+        self.calibrated = True
+        self.get_logger().info(
+            f"calibration{' changed' if not first else ''}: camera_info from "
+            f"{self.info_sub.topic_name} ({self._describe(cam)}); pose from the parameters")
 
     def _on_image(self, msg: Image) -> None:
         t0 = time.perf_counter()
-        self.last_image_wall = time.monotonic()
+        self.last_image_ns = self.get_clock().now().nanoseconds
         if self.missing:
             self.missing = False
-            self.get_logger().info("camera images are arriving again")
+            self.get_logger().info(f"camera images are arriving again on "
+                                   f"{self.image_sub.topic_name}")
         out = BallObservation()
         out.header.stamp = msg.header.stamp
         out.header.frame_id = "world"
+        if not self.calibrated:
+            self.stats["uncalibrated"] += 1
+            self._invalid(out, f"waiting for camera_info on {self.info_sub.topic_name}: "
+                               f"no calibration yet, frame not measured", t0)
+            return
         arr, err = image_to_array(msg)
         if arr is None:
             self._invalid(out, err, t0)
@@ -225,17 +270,19 @@ class CameraNode(Node):
             out.phi = out.theta_used = math.nan
             if det.valid:
                 kind = why.split(" s ")[0].rstrip("0123456789.")  # without the figures
+                text = (f"phi not computed ({why.replace('joint_states', self.js_sub.topic_name)}"
+                        f"); x, y are still valid")
                 if kind != self.last_theta_problem:
-                    self.get_logger().warn(f"phi not computed ({why}); x, y are still valid")
+                    self.get_logger().warn(text)
                 else:
-                    self.get_logger().warn(f"phi not computed ({why}); x, y are still valid",
-                                           throttle_duration_sec=2.0)
+                    self.get_logger().warn(text, throttle_duration_sec=2.0)
                 self.last_theta_problem = kind
         else:
             self.last_theta_problem = ""
             out.phi, out.theta_used = float(det.phi), float(det.theta_used)
         out.processing_time = time.perf_counter() - t0
         self.obs_pub.publish(out)
+        self.stats["published"] += 1
         self.stats["time"] += out.processing_time
         self.last_reason = ""
         key = {0: "found", 1: "not_found", 2: "ambiguous"}.get(status, "invalid")
@@ -259,6 +306,7 @@ class CameraNode(Node):
         out.u = out.v = out.radius_px = out.x = out.y = out.phi = out.theta_used = math.nan
         out.processing_time = time.perf_counter() - t0
         self.obs_pub.publish(out)
+        self.stats["published"] += 1
         self.last_status = BallObservation.INVALID_INPUT
         # a new reason is logged at once, a repeated one at most once a second
         if reason.split(" (", maxsplit=1)[0] != self.last_reason:
@@ -268,23 +316,28 @@ class CameraNode(Node):
         self.last_reason = reason.split(" (", maxsplit=1)[0]
 
     def _watchdog(self) -> None:
-        gap = time.monotonic() - self.last_image_wall
+        now = self.get_clock().now().nanoseconds
+        if now < self.last_image_ns:  # the clock went back (a simulation restarted)
+            self.last_image_ns = now
+        gap = (now - self.last_image_ns) / _NS
         if gap < self.frame_timeout:
             return
         if self.stats["frames"] == 0:  # not armed before the first image
             if gap > 5.0:
-                self.get_logger().warn("no camera image received yet (camera/image_raw)",
+                self.get_logger().warn(f"no camera image received yet on "
+                                       f"{self.image_sub.topic_name}",
                                        throttle_duration_sec=10.0)
             return
         if not self.missing:
-            self.get_logger().warn(f"no camera image for {gap:.1f} s (camera/image_raw)")
+            self.get_logger().warn(f"no camera image for {gap:.1f} s on "
+                                   f"{self.image_sub.topic_name}")
         self.missing = True
         out = BallObservation()
         out.header.stamp = self.get_clock().now().to_msg()
         out.header.frame_id = "world"
         self.stats["missing"] += 1
         self._invalid(out, f"no image for {gap:.1f} s", time.perf_counter(), counted=True)
-        self.last_image_wall = time.monotonic()
+        self.last_image_ns = now
 
     def on_shutdown(self) -> None:
         """Log the counts."""
@@ -293,8 +346,9 @@ class CameraNode(Node):
         self.get_logger().info(
             f"camera: {s['frames']} frames, {s['found']} found, {s['not_found']} not found, "
             f"{s['ambiguous']} ambiguous, {s['invalid']} invalid ({s['missing']} for missing "
-            f"images); mean processing "
+            f"images, {s['uncalibrated']} before camera_info); mean processing "
             f"{1e3 * s['time'] / n:.2f} ms")
+        self.get_logger().info(format_published({self.obs_pub.topic_name: s["published"]}))
 
 
 def main(argv: list[str] | None = None) -> int:

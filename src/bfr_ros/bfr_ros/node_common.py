@@ -13,22 +13,31 @@ names of the files, a node started without any file runs with the shipped values
 YAML file stays the one source of every value. Parameters accept any type on override
 (``-p ball.mass:=1`` is read as 1.0); :func:`read_parameter_tree` casts back to the type of
 the default.
+
+The nodes read their parameters once, at start-up: every parameter is declared read-only
+(``ros2 param set`` answers "Trying to set a read-only parameter", ``ros2 param describe``
+says "read at start-up"), and a name given with ``-p`` or a parameter file that the node
+does not know stops it at start with one line naming it (and the nearest known names), so a
+misspelt parameter is never silently ignored. An unreadable parameter file or a malformed
+``--ros-args`` is a one-line FATAL as well (exit status 2), never a traceback.
 """
 
 from __future__ import annotations
 
+import difflib
 import math
 import signal
 import sys
 import threading
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import rclpy
-from bfr_model.param_file import load_ros_parameters
+from bfr_model.param_file import ParameterError, load_ros_parameters
 from rcl_interfaces.msg import ParameterDescriptor
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.experimental import EventsExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -37,17 +46,20 @@ __all__ = [
     "CLOCK_QOS",
     "COMMAND_QOS",
     "IMAGE_QOS",
+    "IMAGE_SUB_QOS",
     "JOINT_STATES_QOS",
     "STATE_QOS",
     "StopFlag",
     "declare_parameter_tree",
     "finite",
     "flatten",
+    "format_published",
     "image_to_array",
     "init_ros",
     "load_yaml_parameters",
     "make_executor",
     "ns_to_stamp",
+    "parse_published",
     "read_parameter_tree",
     "run_node",
     "stamp_to_ns",
@@ -58,10 +70,19 @@ _NS = 1_000_000_000
 
 
 # -- QoS of the topic contract (README, "Topic contract") -----------------------------------
-#: Images and camera_info: sensor data (best effort, the latest few).
+#: Images and camera_info, publisher side (the emulated camera driver): reliable, keep last
+#: 5, as image_transport's default publisher, so that a recorder that asks for reliable
+#: delivery gets every frame, while a best-effort subscriber (the camera node) still
+#: matches and is never blocked by it.
 IMAGE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=5,
-                       reliability=ReliabilityPolicy.BEST_EFFORT,
+                       reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
+#: Images and camera_info, the camera node's subscriptions: sensor data, keep last 1 (the
+#: newest image only: a stalled node finds no backlog, it measures the present), best
+#: effort (matches reliable and best-effort drivers alike).
+IMAGE_SUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                           reliability=ReliabilityPolicy.BEST_EFFORT,
+                           durability=DurabilityPolicy.VOLATILE)
 #: Effort commands (and the simulator's joint_states publisher): reliable.
 COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                          reliability=ReliabilityPolicy.RELIABLE,
@@ -111,8 +132,16 @@ def unflatten(flat: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def declare_parameter_tree(node: Any, defaults: Mapping[str, Any]) -> None:
-    """Declare one dynamically typed parameter per leaf of ``defaults`` (nested mapping).
+#: Parameters every rclpy node has or accepts (rclpy, rcl), besides a node's own.
+_ROS_PARAMETERS = ("use_sim_time", "start_type_description_service")
+
+#: What ``ros2 param describe`` shows for a bfr node's parameters.
+_STARTUP_ONLY = "read at start-up (read-only): restart the node to change it"
+
+
+def declare_parameter_tree(node: Any, defaults: Mapping[str, Any],
+                           accepted: Iterable[str] = ()) -> None:
+    """Declare one read-only parameter per leaf of ``defaults``; refuse unknown overrides.
 
     Parameters
     ----------
@@ -120,12 +149,35 @@ def declare_parameter_tree(node: Any, defaults: Mapping[str, Any]) -> None:
         The node.
     defaults : mapping
         Nested defaults, e.g. the ``ros__parameters`` of a shipped YAML file.
+    accepted : iterable of str
+        Further names the node accepts without using them (the other entries of a shared
+        parameter file such as rig.yaml, given to several nodes).
+
+    Raises
+    ------
+    bfr_model.param_file.ParameterError
+        If a parameter override (``-p``, ``--params-file``) names a parameter that is
+        neither declared nor accepted (the message names it and the nearest known names).
     """
-    for name, value in flatten(defaults).items():
+    flat = flatten(defaults)
+    for name, value in flat.items():
         if node.has_parameter(name):
             continue
         node.declare_parameter(name, list(value) if isinstance(value, tuple) else value,
-                               ParameterDescriptor(dynamic_typing=True))
+                               ParameterDescriptor(dynamic_typing=True, read_only=True,
+                                                   description=_STARTUP_ONLY))
+    known = set(flat) | set(accepted) | set(_ROS_PARAMETERS)
+    overrides = getattr(node, "_parameter_overrides", {})  # rclpy keeps them there only
+    unknown = sorted(n for n in overrides
+                     if n not in known and not n.startswith("qos_overrides."))
+    if unknown:
+        hints = []
+        for n in unknown:
+            near = difflib.get_close_matches(n, sorted(known), n=2, cutoff=0.6)
+            hints.append(f"{n}" + (f" (did you mean {' or '.join(near)}?)" if near else ""))
+        raise ParameterError(
+            f"unknown parameter{'s' if len(unknown) > 1 else ''} for node "
+            f"{node.get_fully_qualified_name()}: {', '.join(hints)}")
 
 
 def _cast(name: str, value: Any, default: Any) -> Any:
@@ -176,6 +228,26 @@ def read_parameter_tree(node: Any, defaults: Mapping[str, Any]) -> dict[str, Any
         value = node.get_parameter(name).value
         flat[name] = _cast(name, value, default)
     return unflatten(flat)
+
+
+# -- counts of what a node published (logged on exit, compared with a bag by bfr rig) -------
+def format_published(counts: Mapping[str, int]) -> str:
+    """``"published: /a 5, /b 6"``: the log line of a node's published message counts."""
+    return "published: " + ", ".join(f"{topic} {n}" for topic, n in counts.items())
+
+
+def parse_published(text: str) -> dict[str, int]:
+    """Counts of every ``published: ...`` line in a node's log (the last one per topic)."""
+    out: dict[str, int] = {}
+    for line in text.splitlines():
+        _, sep, rest = line.partition("published: ")
+        if not sep:
+            continue
+        for item in rest.split(", "):
+            topic, _, n = item.strip().rpartition(" ")
+            if topic.startswith("/") and n.isdigit():
+                out[topic] = int(n)
+    return out
 
 
 # -- time ----------------------------------------------------------------------------------
@@ -270,8 +342,22 @@ def init_ros(argv: list[str] | None) -> StopFlag:
 
     rclpy's handlers shut the context down at once, so a node could not publish a last
     zero torque or close its bag; ours only set a flag that the node's loop polls.
+
+    Raises
+    ------
+    bfr_model.param_file.ParameterError
+        If rcl cannot parse the command line's ROS arguments or a parameter file (the
+        message is rcl's first line, e.g. the file's YAML error).
     """
-    rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    try:
+        rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
+    except RCLError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        files = [argv[i + 1] for i, a in enumerate(argv or [])
+                 if a == "--params-file" and i + 1 < len(argv or [])]
+        where = f" (parameter file{'s' if len(files) > 1 else ''} {', '.join(files)})" \
+            if files else ""
+        raise ParameterError(f"invalid ROS arguments{where}: {first}") from None
     stop = StopFlag()
     signal.signal(signal.SIGINT, stop.handler)
     signal.signal(signal.SIGTERM, stop.handler)
@@ -302,7 +388,11 @@ def run_node(node_factory: Callable[[], Any], argv: list[str] | None = None,
         Exit status.
     """
     args = list(sys.argv if argv is None else argv)
-    stop = init_ros(args)
+    try:
+        stop = init_ros(args)
+    except ParameterError as exc:
+        print(f"[FATAL] cannot start: {exc}", file=sys.stderr, flush=True)
+        return 2
     status = 0
     node = None
     try:

@@ -62,6 +62,8 @@ from bfr_ros.node_common import (
     IMAGE_QOS,
     STATE_QOS,
     declare_parameter_tree,
+    flatten,
+    format_published,
     load_yaml_parameters,
     ns_to_stamp,
     read_parameter_tree,
@@ -265,7 +267,9 @@ class SimulatorNode(Node):
     def __init__(self) -> None:
         super().__init__("simulator")
         self.defaults = node_defaults()
-        declare_parameter_tree(self, self.defaults)
+        # camera.yaml may be given whole: its detector.* group is the camera node's
+        declare_parameter_tree(self, self.defaults,
+                               flatten(load_yaml_parameters(default_camera_path())))
         p = read_parameter_tree(self, self.defaults)
         rig = {k: p[k] for k in ("ball", "frame", "environment", "joint", "actuator",
                                  "track", "contact") if k in p}
@@ -305,6 +309,8 @@ class SimulatorNode(Node):
         self.last_frame: tuple[Any, int] | None = None
         st = p["start"]
         self.wait_subscribers = int(st["wait_subscribers"])
+        self.wait_info_subscribers = int(st["wait_info_subscribers"])
+        self.wait_truth_subscribers = int(st["wait_truth_subscribers"])
         self.wait_controller = bool(st["wait_controller"])
         self.start_timeout = float(st["timeout"])
         info = self.camera.to_camera_info()
@@ -331,7 +337,7 @@ class SimulatorNode(Node):
         self.state_torque = math.nan
         self.controller_absent = False
         self.absent_check_ns = 0
-        self.stats = {"frames": 0, "joint_states": 0, "truth": 0, "commands": 0,
+        self.stats = {"frames": 0, "joint_states": 0, "truth": 0, "clock": 0, "commands": 0,
                       "ignored_commands": 0, "lockstep_waits": 0, "lockstep_timeouts": 0,
                       "resent": 0, "wait_wall": 0.0}
         self.finished = False
@@ -369,6 +375,7 @@ class SimulatorNode(Node):
             m = self.clock_msg
             ns_to_stamp(t_ns, m.clock)
             self.clock_pub.publish(m)
+            self.stats["clock"] += 1
 
     def _publish_joint_state(self, t_ns: int) -> None:
         m = self.js_msg
@@ -493,25 +500,31 @@ class SimulatorNode(Node):
 
     def wait_for_peers(self, stop: Any) -> None:
         """Before t = 0: wait for subscribers / the controller (``start.*``)."""
-        need_ctrl = self.mode == "lockstep" and self.wait_controller
-        if self.wait_subscribers <= 0 and not need_ctrl:
+        need_ctrl = self.wait_controller
+        waits = [(self.js_pub, self.wait_subscribers), (self.info_pub, self.wait_info_subscribers),
+                 (self.truth_pub, self.wait_truth_subscribers)]
+        if all(n <= 0 for _, n in waits) and not need_ctrl:
             return
         ex = self.executor_ref
         deadline = time.monotonic() + self.start_timeout
         self.get_logger().info(
-            f"waiting for {self.wait_subscribers} joint_states subscriber(s)"
-            + (" and a controller" if need_ctrl else "") + " before starting")
+            "waiting for " + ", ".join(f"{n} subscriber(s) of {pub.topic_name}"
+                                       for pub, n in waits if n > 0)
+            + (f" and a controller ({self.state_sub.topic_name})" if need_ctrl else "")
+            + " before starting")
 
         def ready() -> bool:
-            return (self.js_pub.get_subscription_count() >= self.wait_subscribers
+            return (all(pub.get_subscription_count() >= n for pub, n in waits)
                     and (not need_ctrl or self.state_sub.get_publisher_count() > 0))
 
         while not stop and not ready():
             if time.monotonic() > deadline:
                 self.get_logger().warn(
-                    f"start: peers missing after {self.start_timeout:g} s "
-                    f"({self.js_pub.get_subscription_count()} joint_states subscriber(s), "
-                    f"{self.state_sub.get_publisher_count()} controller(s)); starting anyway")
+                    f"start: peers missing after {self.start_timeout:g} s ("
+                    + ", ".join(f"{pub.get_subscription_count()} subscriber(s) of "
+                                f"{pub.topic_name}" for pub, _ in waits)
+                    + f", {self.state_sub.get_publisher_count()} controller(s)); starting "
+                      f"anyway")
                 return
             ex.spin_once(timeout_sec=0.05)
         # let the remaining endpoints of the same participants match
@@ -575,6 +588,12 @@ class SimulatorNode(Node):
             f"truth, {st['commands']} commands ({st['ignored_commands']} ignored), "
             f"lock-step: {st['lockstep_waits']} waits, {st['lockstep_timeouts']} "
             f"timeouts, {st['resent']} frames re-sent, {st['wait_wall']:.1f} s waiting")
+        self.get_logger().info(format_published({
+            self.js_pub.topic_name: st["joint_states"],
+            self.img_pub.topic_name: st["frames"] + st["resent"],
+            self.info_pub.topic_name: st["frames"] + st["resent"],
+            self.truth_pub.topic_name: st["truth"],
+            self.clock_pub.topic_name: st["clock"]}))
 
 
 

@@ -51,6 +51,7 @@ from bfr_control.orbit import PeriodicOrbit
 from bfr_model.dynamics import RigidModel
 from bfr_model.io.bag import make_typestore, read_bag_messages
 from bfr_model.params import load_params
+from bfr_ros.node_common import parse_published
 
 from bfr_tools.run import executable_path
 
@@ -192,6 +193,16 @@ def _describe_exit(code: int) -> str:
         except ValueError:
             return f"killed by signal {-code}"
     return f"exit status {code}"
+
+
+def published_counts(nodes: dict[str, NodeSpec]) -> dict[str, int]:
+    """Messages each node says it published, per resolved topic (from their logs)."""
+    out: dict[str, int] = {}
+    for name, spec in nodes.items():
+        if name == "recorder" or spec.log_path is None or not spec.log_path.exists():
+            continue
+        out.update(parse_published(spec.log_path.read_text(errors="replace")))
+    return out
 
 
 def _wall_stats(log_path: Path | None) -> tuple[float, float] | None:
@@ -442,9 +453,13 @@ def format_summary(s: dict[str, Any], wall: tuple[float, float] | None = None) -
     if wall is not None:
         lines.append(f"simulator: {dur:.1f} s simulated in {wall[0]:.1f} s of wall time "
                      f"(real-time factor {wall[1]:.2f})")
-    lines.append("topics (count, rate in simulated time):")
+    published = s.get("published", {})
+    lines.append("topics (recorded / published, rate in simulated time):")
     for topic, d in s["topics"].items():
-        lines.append(f"  {topic:<30} {d['count']:>7}  {d['rate']:8.1f} Hz  {d['type']}")
+        pub = published.get(topic)
+        both = f"{d['count']:>7} / {pub if pub is not None else '?':>7}"
+        flag = "" if pub is None or pub == d["count"] else f"  ({pub - d['count']:+d} lost)"
+        lines.append(f"  {topic:<30} {both}  {d['rate']:8.1f} Hz  {d['type']}{flag}")
     return "\n".join(lines)
 
 
@@ -502,9 +517,15 @@ def _node_args(args: argparse.Namespace, log_dir: Path, bag: Path | None,
             per[n] += ["--params-file", str(args.camera_params)]
     if args.controller_params:
         per["controller"] += ["--params-file", str(args.controller_params)]
-    subscribers = 2 + (bag is not None)  # camera, controller, recorder on joint_states
+    rec = int(bag is not None)
+    # the simulator starts when every subscriber is there: camera, controller and recorder
+    # on joint_states, camera and recorder on camera_info, the recorder on sim_truth, and the
+    # controller has finished loading (its controller_state publisher is up)
     per["simulator"] += ["-p", f"sim.mode:={args.mode}", "-p", f"sim.duration:={args.duration}",
-                         "-p", f"start.wait_subscribers:={subscribers}"]
+                         "-p", f"start.wait_subscribers:={2 + rec}",
+                         "-p", f"start.wait_info_subscribers:={1 + rec}",
+                         "-p", f"start.wait_truth_subscribers:={rec}",
+                         "-p", "start.wait_controller:=true"]
     per["simulator"] += [a for k, v in start.items() for a in ("-p", f"{k}:={v!r}")]
     per["controller"] += ["-p", "loop.trigger:=observation"]
     # wall-clock watchdogs: in lock-step a gap only means a slow machine, and this command
@@ -594,6 +615,7 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
         summary = summarize_bag(bag)
         summary["mode"] = args.mode
         summary["interrupted"] = interrupted
+        summary["published"] = published_counts(nodes)
         if wall is not None:
             summary["wall_time"], summary["real_time_factor"] = wall
     return summary, log_dir, bag, wall
