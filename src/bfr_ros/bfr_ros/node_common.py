@@ -38,6 +38,7 @@ import rclpy
 from bfr_model.param_file import ParameterError, load_ros_parameters
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy._rclpy_pybind11 import RCLError
+from rclpy.duration import Duration
 from rclpy.experimental import EventsExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
@@ -53,6 +54,7 @@ __all__ = [
     "declare_parameter_tree",
     "finite",
     "flatten",
+    "flush_publishers",
     "format_published",
     "image_to_array",
     "init_ros",
@@ -228,6 +230,20 @@ def read_parameter_tree(node: Any, defaults: Mapping[str, Any]) -> dict[str, Any
         value = node.get_parameter(name).value
         flat[name] = _cast(name, value, default)
     return unflatten(flat)
+
+
+def flush_publishers(node: Any, timeout: float = 0.5) -> None:
+    """Wait until every reliable publisher's messages are acknowledged (or ``timeout`` s).
+
+    A process that exits right after publishing can take its last messages with it (they
+    are sent asynchronously); called on shutdown so that a recorder gets all of them.
+    """
+    for pub in list(getattr(node, "publishers", [])):
+        if pub.qos_profile.reliability == ReliabilityPolicy.RELIABLE:
+            try:
+                pub.wait_for_all_acked(Duration(seconds=timeout))
+            except Exception:  # noqa: BLE001 - best effort on the way out
+                pass
 
 
 # -- counts of what a node published (logged on exit, compared with a bag by bfr rig) -------
@@ -418,6 +434,7 @@ def run_node(node_factory: Callable[[], Any], argv: list[str] | None = None,
             try:
                 if hasattr(node, "on_shutdown"):
                     node.on_shutdown()
+                flush_publishers(node)
             finally:
                 node.destroy_node()
         if rclpy.ok():

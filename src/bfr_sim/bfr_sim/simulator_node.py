@@ -20,8 +20,14 @@ topic                             type                                 direction
 Modes (``sim.mode``)
 --------------------
 ``realtime``
-    Simulated time advances with the wall clock (times ``sim.real_time_factor``); the
-    latest effort command is applied from the next step on (zero-order hold).
+    Simulated time advances with the wall clock (times ``sim.real_time_factor``); every
+    message that has arrived is taken before each RK4 step, so the latest effort command
+    acts from the next step on (zero-order hold), as a drive applies it. (Taking one
+    message per camera frame instead, as this node did, let commands queue up whenever the
+    simulation ran behind real time, and the torque then acted tens of milliseconds after
+    the frame it answered: the cause of the ball lost in real time, docs/notes/issue-17.md.)
+    When it falls behind real time it runs flat out to catch up (simulated time stays
+    consistent for every node on ``/clock``) and drops the lag only beyond 1 s.
 ``lockstep``
     As fast as the loop allows: after publishing a camera frame at simulated time ``t``
     the simulator waits until the controller has answered that frame, i.e. a
@@ -327,8 +333,13 @@ class SimulatorNode(Node):
         self.clock_pub = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         self.cmd_sub = self.create_subscription(
             Float64MultiArray, "effort_controller/commands", self._on_command, COMMAND_QOS)
-        self.state_sub = self.create_subscription(
+        # controller_state is read in lock-step only (the answer to a frame); the start waits
+        # for a controller in either mode through the graph
+        self.state_topic = self.resolve_topic_name("controller_state")
+        self.state_sub = (self.create_subscription(
             ControllerState, "controller_state", self._on_state, STATE_QOS)
+            if self.mode == "lockstep" else None)
+        self.events = 0  # messages taken (commands, states)
         self.clock_msg = Clock()
         self.js_msg = JointState()
         self.js_msg.name = [self.joint_name]
@@ -352,6 +363,7 @@ class SimulatorNode(Node):
 
     # -- subscriptions --------------------------------------------------------------
     def _on_command(self, msg: Any) -> None:
+        self.events += 1
         why = self.sim.set_command(msg.data)
         if why:
             self.stats["ignored_commands"] += 1
@@ -361,6 +373,7 @@ class SimulatorNode(Node):
             self.stats["commands"] += 1
 
     def _on_state(self, msg: Any) -> None:
+        self.events += 1
         if msg.mode == ControllerState.FAULT:
             return  # a controller in FAULT (e.g. its watchdog) does not answer a frame
         self.state_ns = max(self.state_ns, stamp_to_ns(msg.header.stamp))
@@ -498,6 +511,15 @@ class SimulatorNode(Node):
             ex.spin_once(timeout_sec=max(0.0, min(0.05, deadline - now, resend - now)))
         self.stats["wait_wall"] += time.monotonic() - t0
 
+    def take_messages(self, limit: int = 100) -> None:
+        """Take every message that has arrived (at most ``limit``): the newest command acts."""
+        ex = self.executor_ref
+        for _ in range(limit):
+            n = self.events
+            ex.spin_once(timeout_sec=0.0)
+            if self.events == n:
+                return
+
     def wait_for_peers(self, stop: Any) -> None:
         """Before t = 0: wait for subscribers / the controller (``start.*``)."""
         need_ctrl = self.wait_controller
@@ -510,12 +532,12 @@ class SimulatorNode(Node):
         self.get_logger().info(
             "waiting for " + ", ".join(f"{n} subscriber(s) of {pub.topic_name}"
                                        for pub, n in waits if n > 0)
-            + (f" and a controller ({self.state_sub.topic_name})" if need_ctrl else "")
+            + (f" and a controller ({self.state_topic})" if need_ctrl else "")
             + " before starting")
 
         def ready() -> bool:
             return (all(pub.get_subscription_count() >= n for pub, n in waits)
-                    and (not need_ctrl or self.state_sub.get_publisher_count() > 0))
+                    and (not need_ctrl or self.count_publishers(self.state_topic) > 0))
 
         while not stop and not ready():
             if time.monotonic() > deadline:
@@ -523,7 +545,7 @@ class SimulatorNode(Node):
                     f"start: peers missing after {self.start_timeout:g} s ("
                     + ", ".join(f"{pub.get_subscription_count()} subscriber(s) of "
                                 f"{pub.topic_name}" for pub, _ in waits)
-                    + f", {self.state_sub.get_publisher_count()} controller(s)); starting "
+                    + f", {self.count_publishers(self.state_topic)} controller(s)); starting "
                       f"anyway")
                 return
             ex.spin_once(timeout_sec=0.05)
@@ -557,8 +579,7 @@ class SimulatorNode(Node):
                 while now < target and not stop:
                     ex.spin_once(timeout_sec=target - now)
                     now = time.monotonic()
-                if frame_out:
-                    ex.spin_once(timeout_sec=0.0)
+                self.take_messages()
             if self.duration_ns and self.sim.t_ns >= self.duration_ns:
                 self.finished = True
                 break
