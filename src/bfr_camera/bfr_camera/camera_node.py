@@ -45,14 +45,18 @@ from bfr_ros.node_common import (
     IMAGE_SUB_QOS,
     JOINT_STATES_QOS,
     STATE_QOS,
+    CdrError,
+    RawImage,
+    Throttle,
     declare_parameter_tree,
     flatten,
     format_published,
     image_to_array,
     load_yaml_parameters,
+    ns_to_stamp,
+    parse_joint_state,
     read_parameter_tree,
     run_node,
-    stamp_to_ns,
 )
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
@@ -158,12 +162,15 @@ class CameraNode(Node):
         check(self.frame_timeout > 0, "input.frame_timeout",
               f"must be > 0 s, got {self.frame_timeout}")
         self.obs_pub = self.create_publisher(BallObservation, "ball_observation", STATE_QOS)
+        # images and joint_states arrive serialized and are parsed here (RawImage,
+        # parse_joint_state): no Python message object per image or encoder sample
         self.image_sub = self.create_subscription(Image, "camera/image_raw", self._on_image,
-                                                  IMAGE_SUB_QOS)
+                                                  IMAGE_SUB_QOS, raw=True)
         self.info_sub = self.create_subscription(CameraInfo, "camera/camera_info",
                                                  self._on_info, IMAGE_SUB_QOS)
         self.js_sub = self.create_subscription(JointState, "joint_states", self._on_joints,
-                                               JOINT_STATES_QOS)
+                                               JOINT_STATES_QOS, raw=True)
+        self.throttle = Throttle()
         # timeouts on the node's clock: simulated time under use_sim_time
         self.create_timer(max(self.frame_timeout / 4.0, 0.05), self._watchdog)
         self.started_ns = self.get_clock().now().nanoseconds
@@ -196,19 +203,24 @@ class CameraNode(Node):
                 f"{cam.distortion_model} d {[round(float(v), 4) for v in cam.d]}")
 
     # -- inputs ----------------------------------------------------------------------------
-    def _on_joints(self, msg: JointState) -> None:
-        names = list(msg.name)
+    def _on_joints(self, raw: bytes) -> None:
+        try:
+            t_ns, names, position, velocity, _ = parse_joint_state(raw)
+        except CdrError as exc:
+            if self.throttle("js", 2.0):
+                self.get_logger().warn(f"malformed message on {self.js_sub.topic_name}: {exc}")
+            return
         if self.joint_name in names:
             j = names.index(self.joint_name)
-        elif not names and len(msg.position) == 1:
+        elif not names and len(position) == 1:
             j = 0
         else:
             return  # another joint's message
-        if j >= len(msg.position):
+        if j >= len(position):
             return
-        theta = float(msg.position[j])
-        theta_dot = float(msg.velocity[j]) if j < len(msg.velocity) else 0.0
-        self.theta.add(stamp_to_ns(msg.header.stamp), theta, theta_dot)
+        theta = float(position[j])
+        theta_dot = float(velocity[j]) if j < len(velocity) else 0.0
+        self.theta.add(t_ns, theta, theta_dot)
 
     def _on_info(self, msg: CameraInfo) -> None:
         if not self.use_camera_info:
@@ -234,7 +246,7 @@ class CameraNode(Node):
             f"calibration{' changed' if not first else ''}: camera_info from "
             f"{self.info_sub.topic_name} ({self._describe(cam)}); pose from the parameters")
 
-    def _on_image(self, msg: Image) -> None:
+    def _on_image(self, raw: bytes) -> None:
         t0 = time.perf_counter()
         self.last_image_ns = self.get_clock().now().nanoseconds
         if self.missing:
@@ -242,8 +254,14 @@ class CameraNode(Node):
             self.get_logger().info(f"camera images are arriving again on "
                                    f"{self.image_sub.topic_name}")
         out = BallObservation()
-        out.header.stamp = msg.header.stamp
         out.header.frame_id = "world"
+        try:
+            msg = RawImage(raw)
+        except CdrError as exc:
+            out.header.stamp = self.get_clock().now().to_msg()
+            self._invalid(out, f"malformed image message: {exc}", t0)
+            return
+        ns_to_stamp(msg.stamp_ns, out.header.stamp)
         if not self.calibrated:
             self.stats["uncalibrated"] += 1
             self._invalid(out, f"waiting for camera_info on {self.info_sub.topic_name}: "
@@ -253,7 +271,7 @@ class CameraNode(Node):
         if arr is None:
             self._invalid(out, err, t0)
             return
-        t_ns = stamp_to_ns(msg.header.stamp)
+        t_ns = msg.stamp_ns
         theta, why = self.theta.theta_at(t_ns)
         det = self.detector.detect(arr, 0.0 if theta is None else theta)
         self.stats["frames"] += 1
@@ -272,10 +290,8 @@ class CameraNode(Node):
                 kind = why.split(" s ")[0].rstrip("0123456789.")  # without the figures
                 text = (f"phi not computed ({why.replace('joint_states', self.js_sub.topic_name)}"
                         f"); x, y are still valid")
-                if kind != self.last_theta_problem:
+                if kind != self.last_theta_problem or self.throttle("theta", 2.0):
                     self.get_logger().warn(text)
-                else:
-                    self.get_logger().warn(text, throttle_duration_sec=2.0)
                 self.last_theta_problem = kind
         else:
             self.last_theta_problem = ""
@@ -291,8 +307,9 @@ class CameraNode(Node):
             if det.valid:
                 self.get_logger().info(f"ball found at ({det.x:+.4f}, {det.y:+.4f}) m")
             else:
-                self.get_logger().warn(f"no ball position: {det.status.name} ({det.reason})",
-                                       throttle_duration_sec=1.0)
+                if self.throttle("no_ball", 1.0):
+                    self.get_logger().warn(f"no ball position: {det.status.name} "
+                                           f"({det.reason})")
         self.last_status = status
 
     def _invalid(self, out: BallObservation, reason: str, t0: float,
@@ -311,8 +328,8 @@ class CameraNode(Node):
         # a new reason is logged at once, a repeated one at most once a second
         if reason.split(" (", maxsplit=1)[0] != self.last_reason:
             self.get_logger().warn(f"unusable camera frame: {reason}")
-        else:
-            self.get_logger().warn(f"unusable camera frame: {reason}", throttle_duration_sec=1.0)
+        elif self.throttle("unusable", 1.0):
+            self.get_logger().warn(f"unusable camera frame: {reason}")
         self.last_reason = reason.split(" (", maxsplit=1)[0]
 
     def _watchdog(self) -> None:

@@ -63,9 +63,11 @@ from bfr_ros.node_common import (
     COMMAND_QOS,
     JOINT_STATES_QOS,
     STATE_QOS,
+    CdrError,
     declare_parameter_tree,
     format_published,
     load_yaml_parameters,
+    parse_joint_state,
     read_parameter_tree,
     run_node,
     stamp_to_ns,
@@ -156,8 +158,10 @@ class ControllerNode(Node):
         self.cmd_pub = self.create_publisher(Float64MultiArray, "effort_controller/commands",
                                              COMMAND_QOS)
         self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
+        # joint_states arrive serialized and are parsed here (parse_joint_state): no Python
+        # message object per encoder sample at the encoder's rate
         self.js_sub = self.create_subscription(JointState, "joint_states", self._on_joints,
-                                               JOINT_STATES_QOS)
+                                               JOINT_STATES_QOS, raw=True)
         self.obs_sub = self.create_subscription(BallObservationMsg, "ball_observation",
                                                 self._on_ball, STATE_QOS)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -205,22 +209,24 @@ class ControllerNode(Node):
         ctrl.reset()
 
     # -- inputs ----------------------------------------------------------------------------
-    def _parse_joints(self, msg: JointState) -> tuple[int, float, float] | str | None:
+    def _parse_joints(self, raw: bytes) -> tuple[int, float, float] | str | None:
         """(t_ns, theta, theta_dot), a fault string, or None (another joint's message)."""
-        names = list(msg.name)
+        try:
+            t_ns, names, position, velocity, _ = parse_joint_state(raw)
+        except CdrError as exc:
+            return f"malformed message on {self.js_sub.topic_name}: {exc}"
         if self.joint_name in names:
             j = names.index(self.joint_name)
-        elif not names and len(msg.position) == 1:
+        elif not names and len(position) == 1:
             j = 0
         else:
             return None
-        if j >= len(msg.position) or j >= len(msg.velocity):
+        if j >= len(position) or j >= len(velocity):
             return (f"joint_states for {self.joint_name!r} lack position or velocity "
-                    f"({len(msg.position)} positions, {len(msg.velocity)} velocities)")
-        theta, theta_dot = float(msg.position[j]), float(msg.velocity[j])
+                    f"({len(position)} positions, {len(velocity)} velocities)")
+        theta, theta_dot = float(position[j]), float(velocity[j])
         if not (math.isfinite(theta) and math.isfinite(theta_dot)):
             return f"non-finite joint_states sample (theta {theta}, theta_dot {theta_dot})"
-        t_ns = stamp_to_ns(msg.header.stamp)
         clock = self.get_clock()
         now = clock.now().nanoseconds
         if now > 0 and abs(now - t_ns) > self.max_age_ns:
@@ -249,12 +255,12 @@ class ControllerNode(Node):
             self.exception_fault = True
 
     @guarded("joint_states")
-    def _on_joints(self, msg: JointState) -> None:
-        got = self._parse_joints(msg)
+    def _on_joints(self, raw: bytes) -> None:
+        got = self._parse_joints(raw)
         if got is None:
             return
         if isinstance(got, str):
-            self._enter_fault(got, stamp_to_ns(msg.header.stamp))
+            self._enter_fault(got, None)
             return
         self.js_clock_ns = self.get_clock().now().nanoseconds
         if self.fault and not self.exception_fault:
