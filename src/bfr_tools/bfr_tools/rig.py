@@ -28,7 +28,6 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import fcntl
 import json
 import math
 import os
@@ -36,7 +35,6 @@ import re
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -51,6 +49,7 @@ from bfr_control.orbit import PeriodicOrbit
 from bfr_model.dynamics import RigidModel
 from bfr_model.io.bag import make_typestore, read_bag_messages
 from bfr_model.params import load_params
+from bfr_ros.domain import claim_domain_id
 from bfr_ros.node_common import parse_published
 
 from bfr_tools.run import executable_path
@@ -101,31 +100,6 @@ def orbit_start(phase: float = 0.3, d_theta: float = 0.05, rig_params: str | Non
     x[0] += float(d_theta)
     return dict(zip(("initial.theta", "initial.phi", "initial.theta_dot", "initial.phi_dot"),
                     (float(v) for v in x), strict=True))
-
-
-_DOMAIN_LOCK: IO[str] | None = None
-
-
-def claim_domain_id() -> int:
-    """A ROS domain id that no other bfr process on this machine uses (1..101).
-
-    The claim is an exclusive ``flock`` on ``<tmp>/bfr-ros-domain-<id>.lock``, held for the
-    rest of this process's life: the same scheme as the test suite's (tests/rosutil.py), so a
-    rig and a test run never share a domain.
-    """
-    global _DOMAIN_LOCK  # noqa: PLW0603 - one claim per process
-    start = os.getpid() % 101
-    for k in range(101):
-        domain = 1 + (start + k) % 101
-        handle = (Path(tempfile.gettempdir()) / f"bfr-ros-domain-{domain}.lock").open("a")
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        _DOMAIN_LOCK = handle
-        return domain
-    raise RigError("no free ROS_DOMAIN_ID in 1..101 on this machine")
 
 
 # -- processes ---------------------------------------------------------------------------------

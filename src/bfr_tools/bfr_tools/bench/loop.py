@@ -44,7 +44,6 @@ machine that slows the simulator down does not make it look cheaper or dearer).
 
 from __future__ import annotations
 
-import fcntl
 import itertools
 import math
 import os
@@ -56,10 +55,11 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 import rclpy
+from bfr_ros.domain import claim_domain_id
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import (
     DurabilityPolicy,
@@ -81,7 +81,7 @@ from bfr_tools.bench.common import (
 from bfr_tools.rig import NODES, NodeSpec, orbit_start
 from bfr_tools.run import executable_path
 
-__all__ = ["SPECS", "claim_domain_id", "run"]
+__all__ = ["SPECS", "run"]
 
 _NS = 1_000_000_000
 _FRAME_NS = 5_000_000  # 200 Hz
@@ -106,33 +106,6 @@ SPECS: list[FigureSpec] = [
     FigureSpec("loop.real_time_factor", "simulated / wall time over the measurement", "x"),
 ]
 _BY_KEY = {s.key: s for s in SPECS}
-
-_LOCK: IO[str] | None = None
-_DOMAIN: int | None = None
-
-
-def claim_domain_id() -> int:
-    """Claim a ROS domain id no other process on this machine holds (tests' lock files).
-
-    The claim is an exclusive ``flock`` on ``<tmp>/bfr-ros-domain-<id>.lock`` (the scheme of
-    ``tests/rosutil.py``) held for the rest of the process's life.
-    """
-    global _LOCK, _DOMAIN
-    if _DOMAIN is not None:
-        return _DOMAIN
-    ids = range(1, 102)
-    start = (os.getpid() * 7) % len(ids)
-    for k in range(len(ids)):
-        domain = ids[(start + k) % len(ids)]
-        handle = (Path(tempfile.gettempdir()) / f"bfr-ros-domain-{domain}.lock").open("a")
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        _LOCK, _DOMAIN = handle, domain
-        return domain
-    raise RuntimeError("no free ROS_DOMAIN_ID in 1..101 on this machine")
 
 
 def _cpu_seconds(pid: int) -> float:
