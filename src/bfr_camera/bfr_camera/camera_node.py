@@ -39,8 +39,10 @@ import time
 from collections import deque
 from typing import Any
 
+import numpy as np
+from bfr_model.dynamics import RigidModel
 from bfr_model.param_file import check, config_path
-from bfr_model.params import default_params_path
+from bfr_model.params import RigParams, default_params_path, params_from_dict
 from bfr_ros.node_common import (
     IMAGE_SUB_QOS,
     JOINT_STATES_QOS,
@@ -49,7 +51,6 @@ from bfr_ros.node_common import (
     RawImage,
     Throttle,
     declare_parameter_tree,
-    flatten,
     format_published,
     image_to_array,
     load_yaml_parameters,
@@ -75,17 +76,33 @@ __all__ = ["CameraNode", "ThetaBuffer", "main", "node_defaults"]
 _NS = 1_000_000_000
 
 
+#: Groups of rig.yaml the camera node reads: the ball's size and the frame's contour.
+RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
+
+
 def node_defaults() -> dict[str, Any]:
-    """Defaults: camera.yaml (camera.*, detector.*), ball.radius of rig.yaml, this node's file."""
+    """Defaults: camera.yaml (camera.*, detector.*), rig.yaml, this node's file."""
     d = dict(load_yaml_parameters(default_camera_path()))
-    d["ball"] = {"radius": float(load_yaml_parameters(default_params_path())["ball"]["radius"])}
+    d.update(load_yaml_parameters(default_params_path()))
     d.update(load_yaml_parameters(config_path("bfr_camera", "camera_node.yaml")))
     return d
 
 
-def accepted_parameters() -> set[str]:
-    """Names the node accepts without using them: the rest of rig.yaml (for ``ball.radius``)."""
-    return set(flatten(load_yaml_parameters(default_params_path())))
+def ball_track(rig: RigParams) -> tuple[np.ndarray, np.ndarray]:
+    """The ball's track for the detector's track gate: angle [rad] and radius [m].
+
+    The ball centre's polar angle (clockwise from the frame's +y axis) and its distance from
+    the axis over one turn of the contour, increasing in angle.
+    """
+    phi = np.linspace(0.0, 2.0 * np.pi, 2048, endpoint=False)
+    x = np.zeros((phi.size, 4))
+    x[:, 1] = phi
+    pos = RigidModel(rig).ball_position(x)  # theta = 0: frame coordinates
+    psi = np.mod(np.arctan2(pos[:, 0], pos[:, 1]), 2.0 * np.pi)
+    order = np.argsort(psi)
+    psi, r = psi[order], np.hypot(pos[order, 0], pos[order, 1])
+    keep = np.concatenate([[True], np.diff(psi) > 0])
+    return psi[keep], r[keep]
 
 
 class ThetaBuffer:
@@ -144,7 +161,7 @@ class CameraNode(Node):
     def __init__(self) -> None:
         super().__init__("camera")
         self.defaults = node_defaults()
-        declare_parameter_tree(self, self.defaults, accepted_parameters())
+        declare_parameter_tree(self, self.defaults)
         p = read_parameter_tree(self, self.defaults)
         self.camera_params = dict(p["camera"])
         self.camera: CameraModel = camera_from_dict(self.camera_params)
@@ -153,7 +170,8 @@ class CameraNode(Node):
         what = "is unknown" if self.ball_radius == 0 else f"must be > 0 m, got {self.ball_radius}"
         check(math.isfinite(self.ball_radius) and self.ball_radius > 0, "ball.radius",
               f"{what}: pass --params-file <bfr_model>/config/rig.yaml or -p ball.radius:=<m>")
-        self.detector = BallDetector(self.camera, self.ball_radius, self.detector_config)
+        self.track = ball_track(params_from_dict({k: p[k] for k in RIG_GROUPS if k in p}))
+        self.detector = self._make_detector(self.camera)
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])
         self.joint_name = str(inp["joint_name"])
@@ -197,6 +215,11 @@ class CameraNode(Node):
             f"{'on' if self.detector_config.use_roi else 'off'}, pose "
             f"{[round(v, 4) for v in self.camera_params['position']]} m; {calib}")
 
+    def _make_detector(self, cam: CameraModel) -> BallDetector:
+        det = BallDetector(cam, self.ball_radius, self.detector_config)
+        det.set_track(*self.track)
+        return det
+
     @staticmethod
     def _describe(cam: CameraModel) -> str:
         return (f"{cam.width}x{cam.height}, fx {cam.fx:.1f} fy {cam.fy:.1f} px, "
@@ -234,7 +257,7 @@ class CameraNode(Node):
         try:
             cam = CameraModel.from_camera_info(msg, **{k: (tuple(v) if isinstance(v, list)
                                                            else v) for k, v in pose.items()})
-            det = BallDetector(cam, self.ball_radius, self.detector_config)
+            det = self._make_detector(cam)
         except (CameraModelError, ValueError) as exc:
             self.get_logger().error(f"camera_info rejected, keeping the previous calibration: "
                                     f"{exc}")
@@ -273,7 +296,8 @@ class CameraNode(Node):
             return
         t_ns = msg.stamp_ns
         theta, why = self.theta.theta_at(t_ns)
-        det = self.detector.detect(arr, 0.0 if theta is None else theta)
+        det = self.detector.detect(arr, 0.0 if theta is None else theta,
+                                   gate=theta is not None)
         self.stats["frames"] += 1
         status = int(det.status)
         if det.status == DetectionStatus.INVALID_INPUT:

@@ -228,6 +228,11 @@ class DetectorConfig:
         Minimum confidence of a FOUND result [-].
     ball_plane_z : float
         World z of the plane the ball centre moves in [m] (0: the frame's plane).
+    track_gate : float
+        Track gate [m]: when the detector knows the track (:meth:`BallDetector.set_track`)
+        and the frame angle, a ball-like object whose centre lies further than this from
+        the ball's track (radially) is not the ball (a hole, the hub, a bolt head of the
+        frame); 0 turns the gate off.
     """
 
     polarity: str = "bright"
@@ -248,6 +253,7 @@ class DetectorConfig:
     radius_prior_sigma: float = 0.05
     min_confidence: float = 0.2
     ball_plane_z: float = 0.0
+    track_gate: float = 0.02
 
     def __post_init__(self) -> None:
         one_of("detector.polarity", self.polarity, ("bright", "dark"))
@@ -260,6 +266,7 @@ class DetectorConfig:
         integer("detector.n_rays", self.n_rays, minimum=16)
         integer("detector.max_candidates", self.max_candidates, minimum=1)
         finite("detector.ball_plane_z", self.ball_plane_z)
+        nonnegative("detector.track_gate", self.track_gate)
         # counts are used as such (array sizes): 64.0 passes the check and becomes 64
         object.__setattr__(self, "n_rays", int(self.n_rays))
         object.__setattr__(self, "max_candidates", int(self.max_candidates))
@@ -560,6 +567,39 @@ class BallDetector:
         self._rwc = camera.R_wc.tolist()
         self._triples: dict[int, np.ndarray] = {}
         self._last: tuple[float, float] | None = None
+        self._track: tuple[np.ndarray, np.ndarray] | None = None
+        self._gate_theta: float | None = None
+
+    def set_track(self, ball_angle: ArrayLike, centre_radius: ArrayLike) -> None:
+        """The ball's track: distance of the ball centre from the axis [m] by its angle.
+
+        Parameters
+        ----------
+        ball_angle : array_like
+            Polar angles of the ball centre in frame coordinates, clockwise from the
+            frame's +y axis (``psi = theta + atan2(x, y)``), increasing over one turn [rad].
+        centre_radius : array_like
+            ``|p|`` at those angles [m] (the offset curve of the contour).
+        """
+        a = np.asarray(ball_angle, float)
+        r = np.asarray(centre_radius, float)
+        if a.ndim != 1 or a.shape != r.shape or a.size < 8 or np.any(np.diff(a) <= 0):
+            raise ValueError("track: increasing ball angles and radii of the same length")
+        self._track = (a, r)
+
+    def _off_track(self, fit: _Fit) -> str:
+        """Why a fit is not the ball on its track (empty: it may be)."""
+        if self._track is None or self._gate_theta is None or not self.config.track_gate:
+            return ""
+        x, y = float(fit.world[0]), float(fit.world[1])
+        a, r = self._track
+        psi = self._gate_theta + math.atan2(x, y)
+        expect = float(np.interp(psi, a, r, period=2.0 * math.pi))
+        dr = math.hypot(x, y) - expect
+        if abs(dr) > self.config.track_gate:
+            return (f"object {1e3 * dr:+.0f} mm off the ball's track (gate "
+                    f"{1e3 * self.config.track_gate:g} mm): part of the frame")
+        return ""
 
     # -- state -----------------------------------------------------------------------------
     @property
@@ -587,7 +627,7 @@ class BallDetector:
     # -- main entry ------------------------------------------------------------------------
     def detect(self, image: ArrayLike, theta: float = 0.0, *,
                hint: tuple[float, float] | None = None,
-               use_roi: bool | None = None) -> Detection:
+               use_roi: bool | None = None, gate: bool = True) -> Detection:
         """Find the ball in one frame.
 
         Parameters
@@ -602,6 +642,9 @@ class BallDetector:
             Where to look first [px] (default: the last fix).
         use_roi : bool, optional
             Override ``config.use_roi`` for this call.
+        gate : bool
+            Apply the track gate (needs the track and a true theta; pass False when theta
+            is a stand-in value).
 
         Returns
         -------
@@ -622,6 +665,7 @@ class BallDetector:
             return Detection(DetectionStatus.INVALID_INPUT, f"theta must be finite, got {theta}",
                              processing_time=time.perf_counter() - t0)
         roi_on = self.config.use_roi if use_roi is None else bool(use_roi)
+        self._gate_theta = theta if gate else None
         where = hint if hint is not None else self._last
         result: Detection | None = None
         u = v = math.nan
@@ -630,7 +674,8 @@ class BallDetector:
         if math.isfinite(u) and math.isfinite(v):
             # tracking: refine straight from the last fix (the ball moved a few pixels) ...
             fit = self._refine(gray, scale, u, v)
-            if fit.ok and fit.confidence >= self.config.min_confidence:
+            if fit.ok and fit.confidence >= self.config.min_confidence \
+                    and not self._off_track(fit):
                 result = self._found(fit, theta, "roi", fit.box)
             else:  # ... else look for candidates in the region of interest
                 result = self._search(gray, scale, theta, self._roi((u, v)), "roi")
@@ -762,11 +807,12 @@ class BallDetector:
             if found and score < cfg.ambiguity_score * top_score:
                 break
             fit = self._refine(gray, scale, u, v)
-            if fit.ok:
+            off = self._off_track(fit) if fit.ok else ""
+            if fit.ok and not off:
                 if not any(math.hypot(fit.u - f.u, fit.v - f.v) < self._r_px for f in found):
                     found.append(fit)
             else:
-                reasons.append(fit.reason)
+                reasons.append(off or fit.reason)
         if not found:
             why = reasons[0] if reasons else "no candidate"
             return Detection(DetectionStatus.NOT_FOUND,

@@ -374,7 +374,7 @@ class ControllerNode(Node):
                      f"phi_dot = {cmd.phi_dot:.3f} rad/s")
         elif mode == ControllerState.BALL_LOST and cmd.mode == BALL_LOST:
             log.error(f"BALL_LOST at t = {t:.3f} s: {reason}; torque 0 (latched: restart the "
-                      f"node or call ~/reset)")
+                      f"node or call ~/reset); last lead {1e3 * cmd.lead:.1f} ms")
         elif mode == ControllerState.WAITING:
             log.info(f"WAITING at t = {t:.3f} s: {reason}")
 
