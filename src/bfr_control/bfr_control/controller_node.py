@@ -155,6 +155,10 @@ class ControllerNode(Node):
         self.max_age_ns = round(float(safety["max_stamp_age"]) * _NS)
         self.acquire_timeout = float(safety["acquire_timeout"])
         self.limit = self.ctrl.torque_limit
+        ceiling = float(safety["max_torque"])
+        check(0.0 < self.limit <= ceiling, "actuator.torque_limit",
+              f"{self.limit:g} N m is above the node's ceiling safety.max_torque = {ceiling:g} "
+              f"N m (raise that only for a stronger motor)")
         self.cmd_pub = self.create_publisher(Float64MultiArray, "effort_controller/commands",
                                              COMMAND_QOS)
         self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
