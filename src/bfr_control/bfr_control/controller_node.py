@@ -209,7 +209,7 @@ class ControllerNode(Node):
         for k in range(8):
             t = 0.005 * k
             ctrl.step(t, float(x[0]) + float(x[2]) * t, float(x[2]),
-                      BallObservation(t, float(pos[0]), float(pos[1]), True))
+                      BallObservation(t, float(pos[0]), float(pos[1]), True), lead=0.002)
         ctrl.reset()
 
     # -- inputs ----------------------------------------------------------------------------

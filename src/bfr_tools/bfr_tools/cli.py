@@ -56,6 +56,8 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
     ),
     "camera-eval": ("bfr_tools.camera_eval", "main", "ball detector: accuracy and speed figures"),
     "bench": ("bfr_tools.bench", "main", "performance figures side by side, with budgets"),
+    "warm": ("bfr_tools.warm", "main",
+             "compile and cache the nodes' kernels and gains (scripts/setup runs it)"),
     "analyze": (
         "bfr_tools.analysis.cli",
         "main",
