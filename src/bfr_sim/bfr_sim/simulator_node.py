@@ -326,7 +326,8 @@ class SimulatorNode(Node):
             setattr(self.info_msg, key, info[key])
         self.info_msg.header.frame_id = info["frame_id"]
         # publishers and subscriptions (relative names: remappable, namespaceable)
-        self.js_pub = self.create_publisher(JointState, "joint_states", COMMAND_QOS)
+        # reliable, keep last 100: a recorder that falls a few ms behind loses nothing
+        self.js_pub = self.create_publisher(JointState, "joint_states", STATE_QOS)
         self.img_pub = self.create_publisher(Image, "camera/image_raw", IMAGE_QOS)
         self.info_pub = self.create_publisher(CameraInfo, "camera/camera_info", IMAGE_QOS)
         self.truth_pub = self.create_publisher(SimTruth, "sim_truth", STATE_QOS)
