@@ -56,14 +56,14 @@ ROLLING, BALL_LOST, FAULT = (ControllerState.ROLLING, ControllerState.BALL_LOST,
                              ControllerState.FAULT)
 
 
-def orbit_start_standin(phase: float = 0.3) -> dict[str, float]:
+def orbit_start_standin(phase: float = 0.3, rig_yaml: Path | None = None) -> dict[str, float]:
     """``initial.*`` of the stand-in: our orbit at contact angle ``phase``, in its convention.
 
     The stand-in's ``initial.ball_angle`` is the ball centre's polar angle, clockwise from
     the frame's +y axis; ours is the contact point's angle phi. ``OffsetCurve.ball_angle``
     converts; its rate follows by the chain rule (numerical derivative over 1e-6 rad).
     """
-    params = load_params()
+    params = load_params(rig_yaml)
     ctrl = OrbitalController(params, load_controller_config())
     theta, phi, theta_dot, phi_dot = (float(v) for v in ctrl.orbit_state(phase))
     curve = ctrl.model.curve
