@@ -97,7 +97,7 @@ def test_commissioning_loop_on_a_rig_with_every_effect(ros_harness: rosutil.RosH
     cam_yaml = camera_file(node_processes, h, tmp_path)
     # 1. the frame held, the ball rolling free on it (to and fro in the waist's valley)
     held = tmp_path / "held"
-    record(node_processes, h, held, {"time_scale": 0.5, "duration": 6.0, "seed": 7,
+    record(node_processes, h, held, {"time_scale": 0.5, "duration": 5.0, "seed": 7,
                                      "frame_locked": "true", "initial.ball_angle": 0.35,
                                      **EFFECTS}, cam_yaml)
     # 2. a friction run: no ball, torque steps of +-6 mN m and 10 mN m
@@ -120,7 +120,7 @@ def test_commissioning_loop_on_a_rig_with_every_effect(ros_harness: rosutil.RosH
     h.wait_for_match(watch.state_sub, timeout=90)
     assert h.spin_until(lambda: "mode WAITING (no ball yet)" in ctl.output(), timeout=90)
     truth_csv = tmp_path / "truth.csv"
-    duration = 6.0
+    duration = 5.0
     rig = node_processes.start_python(str(STANDIN), args=standin_args({
         "time_scale": 0.25, "duration": duration, "seed": 7, "truth_out": str(truth_csv),
         **EFFECTS, **orbit_start_standin(0.3, c2)}))

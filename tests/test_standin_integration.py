@@ -153,7 +153,7 @@ def test_nodes_keep_the_standins_ball_rolling(ros_harness: rosutil.RosHarness,
     watch = Watch(h)
     cam_yaml = camera_file(node_processes, h, tmp_path)
     cam, ctl = start_nodes(node_processes, h, cam_yaml, watch)
-    duration = 8.0
+    duration = 6.0
     scale = 0.25
     for attempt in range(3):
         truth_csv = tmp_path / f"truth{attempt}.csv"
