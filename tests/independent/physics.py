@@ -45,9 +45,9 @@ Hybrid, three modes for the ball (plus NONE, no ball on the rig):
 The frame joint has Coulomb friction that may differ by direction, with stick (Karnopp: the
 frame sticks when its speed crosses zero and breaks away when the torque needed to hold it
 exceeds the Coulomb level), viscous friction, a torque offset, a motor torque gain and an
-imbalance ``m_f e``. Rolling resistance is a couple ``mu_rol N R`` opposing the ball's
-rolling relative to the frame. Slip between ball and frame is not modelled (rolling whenever
-in contact).
+imbalance ``m_f e``. Rolling resistance is a couple ``mu_rol |N| R`` opposing the ball's
+rolling relative to the frame (its sign regularised by ``tanh(psi_dot / 0.01 rad/s)``).
+Slip between ball and frame is not modelled (rolling whenever in contact).
 
 Lagrangian (derived here; ``m`` ball mass, ``J_b`` ball inertia, ``J_f`` frame inertia)
 -------------------------------------------------------------------------------------
@@ -71,7 +71,7 @@ So ``M = [[J_f + m r^2 + J_b, -(m r^2 + J_b l / R)], [., l^2 (m + J_b / R^2)]]``
     M11 th'' + M12 ps'' + M11' th' ps' + M12' ps'^2 + m g r sin(psi - theta)
         = k_u u + tau_0 + m_f e g sin(theta - theta_e) + tau_fric
     M12 th'' + M22 ps'' - 1/2 M11' th'^2 + 1/2 M22' ps'^2 + m g (r' cos - r sin)(psi - theta)
-        = -mu_rol l N tanh(ps' / eps_r)
+        = -mu_rol l |N| tanh(ps' / eps_r)
 
 with ``M11' = 2 m r r'``, ``l' = r' (r + r'') / l``, ``M12' = -(2 m r r' + J_b l' / R)``,
 ``M22' = 2 l l' (m + J_b / R^2)``. The normal force (ball acceleration minus gravity, along
@@ -680,7 +680,7 @@ class Plant:
         roll = P.rolling_resistance * ell * math.tanh(psd / ROLL_SIGN_SPEED)
         if self.stuck:
             N = n0
-            q = -roll * N
+            q = -roll * abs(N)
             psdd = (q - h2) / M22
             tau_f = M12 * psdd + h1 - u_a - tau_imb
             return 0.0, psdd, N, q, tau_f, ell
@@ -694,7 +694,7 @@ class Plant:
             thdd = (b1 * M22 - M12 * b2) / det
             psdd = (M11 * b2 - M12 * b1) / det
             N = n0 + n_th * thdd
-            q = -roll * N
+            q = -roll * abs(N)
         return thdd, psdd, N, q, tau_f, ell
 
     def _step_rolling(self, h: float) -> None:

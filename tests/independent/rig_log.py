@@ -667,8 +667,8 @@ def standard_set(out: Path, seed: int, quick: bool = False, truth_series: bool =
                                         speed_ref=-1.0)],
         "step_pair": [RunSpec(kind="step", duration=max(1.0, 5.0 * scale), torque=0.01)] * 2,
         "held": [RunSpec(kind="held", duration=20.0 * scale,
-                         ball_offset=float(rng.uniform(0.15, 0.35)),
-                         ball_offset_dot=float(rng.uniform(-2.5, 2.5)))],
+                         ball_offset=float(rng.uniform(0.1, 0.25)),
+                         ball_offset_dot=float(rng.uniform(-1.5, 1.5)))],
         "sine": [RunSpec(kind="sine", duration=30.0 * scale, torque=0.01, frequency=0.2)],
     }
     sidecars = []
