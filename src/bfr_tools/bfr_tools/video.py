@@ -32,6 +32,7 @@ import math
 import os
 import sys
 import time
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -371,11 +372,13 @@ def _states(rec: Recording, times: NDArray[np.float64], params: RigParams, curve
 def _window(rec: Recording, start: float | None, end: float | None) -> tuple[float, float]:
     t0 = float(rec.t[0]) if start is None else start
     t1 = float(rec.t[-1]) if end is None else end
-    if not (math.isfinite(t0) and math.isfinite(t1)) or t1 < t0:
-        raise VideoError(f"--start {t0:g} s / --end {t1:g} s: the end must not precede the start")
+    if not (math.isfinite(t0) and math.isfinite(t1)):
+        raise VideoError(f"--start {t0:g} s / --end {t1:g} s must be finite")
     if t0 > rec.t[-1] or t1 < rec.t[0]:
         raise VideoError(f"--start {t0:g} s / --end {t1:g} s lies outside the recording "
                          f"({rec.t[0]:g} to {rec.t[-1]:g} s)")
+    if t1 < t0:
+        raise VideoError(f"--start {t0:g} s / --end {t1:g} s: the end must not precede the start")
     return max(t0, float(rec.t[0])), min(t1, float(rec.t[-1]))
 
 
@@ -404,7 +407,13 @@ def make_video(args: argparse.Namespace) -> tuple[Path, int, str]:
         params = load_params(args.params)
     except (ParameterError, OSError) as exc:
         raise VideoError(f"--params: {exc}") from exc
-    rec = read_recording(args.recording)
+    if not args.recording.exists():
+        raise VideoError(f"{args.recording}: no such recording (file or bag directory)")
+    with warnings.catch_warnings(record=True) as caught:  # the reader's notes, one line each
+        warnings.simplefilter("always")
+        rec = read_recording(args.recording)
+    for w in caught:
+        print(f"bfr video: warning: {w.message}", file=sys.stderr)
     t0, t1 = _window(rec, args.start, args.end)
     note = ""
     gif = kind == "gif"
