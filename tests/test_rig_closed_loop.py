@@ -110,12 +110,19 @@ def test_bag_shows_the_rig_in_the_world_frame(run: tuple[dict, Path]) -> None:
             exact += 1
         elif 0 < i < tt.size:  # between two truth samples (5 ms apart): on the line between
             near.append(math.hypot(x - np.interp(t, tt, tx), y - np.interp(t, tt, ty)))
-        # the front plate's contour is the frame at theta: its +y-axis vertex (phi = 0, the
-        # waist a - b) turned by the encoder's theta at that instant
+        # the front plate's contour is the frame at theta: its first vertex (phi = 0, the
+        # waist a - b on the frame's +y axis) turned by the pose's orientation, which is the
+        # encoder's theta at that instant
         th = np.interp(t, jt, jth)
-        v0 = parts["frame", 0].points[0]
+        front = parts["frame", 0]
+        q = front.pose.orientation
+        yaw = 2.0 * math.atan2(q.z, q.w)
+        v0 = front.points[0]
         r = p.frame.contour.a - p.frame.contour.b
-        contour_err.append(math.hypot(v0.x + r * math.sin(th), v0.y - r * math.cos(th)))
+        assert (v0.x, v0.y) == pytest.approx((0.0, r), abs=1e-12)
+        wx, wy = v0.x * math.cos(yaw) - v0.y * math.sin(yaw), v0.x * math.sin(yaw) + v0.y * \
+            math.cos(yaw)
+        contour_err.append(math.hypot(wx + r * math.sin(th), wy - r * math.cos(th)))
         assert v0.z == pytest.approx(0.5 * p.ball.plate_distance)
     n = len(by_topic["/sim_markers"])
     assert exact >= 0.2 * n and len(near) >= 0.5 * n, (exact, len(near), n)

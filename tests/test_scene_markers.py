@@ -79,6 +79,11 @@ def test_rig_markers_parts() -> None:
                           ("contact", 0), ("label", 0)}
     front, back = specs["frame", 0].points, specs["frame", 1].points
     assert front[0] == pytest.approx(front[-1])  # closed
+    # the points are the outline in frame coordinates; the pose turns them by theta
+    q = specs["frame", 0].orientation
+    assert q == pytest.approx((0.0, 0.0, math.sin(0.2), math.cos(0.2)))
+    assert rotate(0.4, front[:-1, :2]) == pytest.approx(pic.contour, abs=1e-12)
+    assert specs["frame", 0].points is rig_markers(picture(1.3, phi=0.1))[0].points  # shared
     assert front[:, 2] == pytest.approx(0.5 * DF) and back[:, 2] == pytest.approx(-0.5 * DF)
     ball = specs["ball", 0]
     assert ball.kind == "sphere" and ball.position == pytest.approx(pic.ball)
@@ -106,6 +111,8 @@ def test_messages_carry_the_specs() -> None:
     stamp = 12_345_678_901
     arr = marker_array(specs, stamp)
     assert len(arr.markers) == len(specs)
+    again = marker_array(rig_markers(picture(2.0, phi=0.3)), stamp)  # another instant
+    assert again.markers[0].points[5] == arr.markers[0].points[5]
     for m, s in zip(arr.markers, specs, strict=True):
         assert m.header.frame_id == WORLD_FRAME == "world"
         assert (m.header.stamp.sec, m.header.stamp.nanosec) == (12, 345_678_901)
@@ -114,6 +121,8 @@ def test_messages_carry_the_specs() -> None:
             pytest.approx(s.position)
         assert [m.scale.x, m.scale.y, m.scale.z] == pytest.approx(s.scale)
         assert [m.color.r, m.color.g, m.color.b, m.color.a] == pytest.approx(s.color)
+        q = m.pose.orientation
+        assert [q.x, q.y, q.z, q.w] == pytest.approx(s.orientation)
         if s.points is not None:
             got = np.array([[p.x, p.y, p.z] for p in m.points])
             assert got == pytest.approx(s.points)

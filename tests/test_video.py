@@ -112,7 +112,7 @@ def test_frame_shows_the_rig_where_the_recording_puts_it() -> None:
     au, av = np.round(plan.px([0.0, 0.0])).astype(int)
     assert tuple(img[av, au]) == bgr("shaft")
     # a point of the plate inside the contour, away from the mark: the plate's colour
-    inner = np.round(plan.px(0.5 * pic.contour[45])).astype(int)
+    inner = np.round(plan.px(0.5 * pic.contour[30])).astype(int)
     assert tuple(img[inner[1], inner[0]]) == bgr("back_plate")
     # the torque bar at the limit: red, reaching the right end
     row = img[round(480 - 0.065 * 480)]

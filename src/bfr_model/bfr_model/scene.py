@@ -93,9 +93,12 @@ class RigPicture:
     ----------
     theta : float
         Frame angle [rad].
+    outline : ndarray, shape (n, 2)
+        The plates' edge in frame coordinates, ``delta(phi_i)`` on ``n`` contact angles
+        ``phi_i = 2 pi i / n`` [m] (open polygon: close it to draw). Shared between pictures
+        of one curve (do not modify).
     contour : ndarray, shape (n, 2)
-        The plates' edge ``Rot(theta) delta(phi_i)`` on ``n`` contact angles [m] (open
-        polygon: close it to draw).
+        The same in the world, ``Rot(theta) delta(phi_i)`` [m].
     ball : ndarray, shape (3,) or None
         Ball centre [m] (z: out of the plane; 0 for the rigid model without wobble); None when
         the ball is not known.
@@ -109,6 +112,7 @@ class RigPicture:
     """
 
     theta: float
+    outline: FloatArray
     contour: FloatArray
     ball: FloatArray | None
     contact: FloatArray | None
@@ -123,9 +127,42 @@ class RigPicture:
               f"must be < 2 R_b = {2.0 * self.ball_radius} m (the ball must reach the plates)")
 
 
+_OUTLINES: dict[tuple[int, int], tuple[OffsetCurve, FloatArray]] = {}
+_RINGS: dict[tuple[int, float], tuple[FloatArray, FloatArray]] = {}
+
+
+def _outline(curve: OffsetCurve, n: int) -> FloatArray:
+    """``delta(2 pi i / n)``, i < n, in frame coordinates, computed once per curve and n."""
+    check(n >= 8, "n_contour", f"must be >= 8, got {n}")
+    key = (id(curve), n)
+    hit = _OUTLINES.get(key)
+    if hit is None or hit[0] is not curve:
+        if len(_OUTLINES) > 32:
+            _OUTLINES.clear()
+        grid = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
+        out = curve.contour_point(grid)
+        out.flags.writeable = False
+        hit = _OUTLINES[key] = (curve, out)
+    return hit[1]
+
+
+def _ring(outline: FloatArray, z: float) -> FloatArray:
+    """The closed outline lifted to z, shape (n + 1, 3): one array per outline and z."""
+    key = (id(outline), z)
+    hit = _RINGS.get(key)
+    if hit is None or hit[0] is not outline:
+        if len(_RINGS) > 64:
+            _RINGS.clear()
+        ring = np.vstack([outline, outline[:1]])
+        out = np.column_stack([ring, np.full(len(ring), z)])
+        out.flags.writeable = False
+        hit = _RINGS[key] = (outline, out)
+    return hit[1]
+
+
 def rig_picture(curve: OffsetCurve, theta: float, *, phi: float | None = None,
                 ball_xy: ArrayLike | None = None, ball_z: float = 0.0, ball_radius: float,
-                plate_distance: float, n_contour: int = 180) -> RigPicture:
+                plate_distance: float, n_contour: int = 64) -> RigPicture:
     """The rig at frame angle ``theta``, the ball given by its contact angle or its position.
 
     Parameters
@@ -144,16 +181,15 @@ def rig_picture(curve: OffsetCurve, theta: float, *, phi: float | None = None,
     ball_radius, plate_distance : float
         R_b and d_f [m].
     n_contour : int
-        Points of the contour polygon.
+        Points of the contour polygon (64: chords within 0.4 mm of the nominal contour).
 
     Returns
     -------
     RigPicture
         Without a ball (and contact) when neither ``phi`` nor a finite ``ball_xy`` is given.
     """
-    check(n_contour >= 8, "n_contour", f"must be >= 8, got {n_contour}")
-    grid = np.linspace(0.0, 2.0 * np.pi, n_contour, endpoint=False)
-    contour = rotate(theta, curve.contour_point(grid))
+    outline = _outline(curve, n_contour)
+    contour = rotate(theta, outline)
     ball: FloatArray | None = None
     contact: FloatArray | None = None
     have_xy = ball_xy is not None and bool(np.all(np.isfinite(np.asarray(ball_xy, float))))
@@ -166,7 +202,8 @@ def rig_picture(curve: OffsetCurve, theta: float, *, phi: float | None = None,
         centre = (np.asarray(ball_xy, float) if have_xy
                   else rotate(theta, curve.point(np.array([phi]))[0]))
         ball = np.array([centre[0], centre[1], float(ball_z)])
-    return RigPicture(theta=float(theta), contour=contour, ball=ball, contact=contact,
+    return RigPicture(theta=float(theta), outline=outline, contour=contour, ball=ball,
+                      contact=contact,
                       ball_radius=float(ball_radius), plate_distance=float(plate_distance))
 
 
@@ -232,19 +269,15 @@ class MarkerSpec:
         check(self.lifetime >= 0.0, "marker.lifetime", f"must be >= 0 s, got {self.lifetime}")
 
 
-def _closed(xy: FloatArray, z: float) -> FloatArray:
-    """Close a polygon (n, 2) and lift it to z: shape (n + 1, 3)."""
-    ring = np.vstack([xy, xy[:1]])
-    return np.column_stack([ring, np.full(len(ring), z)])
-
-
 def rig_markers(pic: RigPicture, *, label: str = "", line_width: float = 2.0e-3
                 ) -> list[MarkerSpec]:
     """The simulator's markers of one instant.
 
     Namespaces and ids:
 
-    - ``frame`` 0 / 1: the front / back plate's edge (closed line strips at ``z = +-d_f/2``);
+    - ``frame`` 0 / 1: the front / back plate's edge (closed line strips at ``z = +-d_f/2``),
+      points in frame coordinates, the pose's orientation the frame's: ``theta`` about z
+      (so the points are the same array every time: a publisher converts them once);
     - ``shaft`` 0: the axis (a cylinder along z at the origin);
     - ``ball`` 0: the ball (a sphere of diameter ``2 R_b`` at its centre), DELETE when unknown;
     - ``contact`` 0: the two contact points (a sphere list), DELETE when unknown;
@@ -260,11 +293,14 @@ def rig_markers(pic: RigPicture, *, label: str = "", line_width: float = 2.0e-3
         Width of the plate edges [m].
     """
     h = 0.5 * pic.plate_distance
+    q = (0.0, 0.0, math.sin(0.5 * pic.theta), math.cos(0.5 * pic.theta))  # Rot(theta) about z
     out = [
-        MarkerSpec(ns="frame", id=0, kind="line_strip", scale=(line_width, 1.0, 1.0),
-                   color=COLORS["front_plate"], points=_closed(pic.contour, h)),
-        MarkerSpec(ns="frame", id=1, kind="line_strip", scale=(line_width, 1.0, 1.0),
-                   color=COLORS["back_plate"], points=_closed(pic.contour, -h)),
+        MarkerSpec(ns="frame", id=0, kind="line_strip", orientation=q,
+                   scale=(line_width, 1.0, 1.0), color=COLORS["front_plate"],
+                   points=_ring(pic.outline, h)),
+        MarkerSpec(ns="frame", id=1, kind="line_strip", orientation=q,
+                   scale=(line_width, 1.0, 1.0), color=COLORS["back_plate"],
+                   points=_ring(pic.outline, -h)),
         MarkerSpec(ns="shaft", id=0, kind="cylinder",
                    scale=(0.008, 0.008, 2.0 * pic.plate_distance), color=COLORS["shaft"]),
     ]

@@ -45,6 +45,26 @@ _TYPES = {"sphere": Marker.SPHERE, "cylinder": Marker.CYLINDER,
           "text_view_facing": Marker.TEXT_VIEW_FACING}
 
 
+_POINTS: dict[int, tuple[Any, list[Point]]] = {}
+
+
+def _points(arr: Any) -> list[Point]:
+    """``geometry_msgs/Point`` objects of an (n, 3) array; read-only arrays converted once.
+
+    The simulator's plate outlines are the same read-only array in every message (their pose
+    turns them), so their points are built once and shared.
+    """
+    if getattr(arr, "flags", None) is None or arr.flags.writeable:
+        return [Point(x=float(a), y=float(b), z=float(c)) for a, b, c in arr]
+    hit = _POINTS.get(id(arr))
+    if hit is None or hit[0] is not arr:
+        if len(_POINTS) > 64:
+            _POINTS.clear()
+        hit = _POINTS[id(arr)] = (arr, [Point(x=float(a), y=float(b), z=float(c))
+                                        for a, b, c in arr])
+    return hit[1]
+
+
 def marker_message(spec: MarkerSpec, stamp_ns: int, frame_id: str = WORLD_FRAME) -> Marker:
     """One ``visualization_msgs/Marker`` from a spec, stamped ``stamp_ns`` [ns]."""
     m = Marker()
@@ -64,7 +84,7 @@ def marker_message(spec: MarkerSpec, stamp_ns: int, frame_id: str = WORLD_FRAME)
     c = m.color
     c.r, c.g, c.b, c.a = (float(v) for v in spec.color)
     if spec.points is not None:
-        m.points = [Point(x=float(a), y=float(b), z=float(z)) for a, b, z in spec.points]
+        m.points = _points(spec.points)
     m.text = spec.text
     life_ns = round(spec.lifetime * _NS)
     m.lifetime.sec, m.lifetime.nanosec = life_ns // _NS, life_ns % _NS
