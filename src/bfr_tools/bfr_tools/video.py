@@ -49,10 +49,13 @@ from bfr_model.recording import Recording
 from bfr_model.scene import COLORS, RigPicture, rig_picture
 from numpy.typing import NDArray
 
+from bfr_interfaces.msg import ControllerState
+
 __all__ = ["VideoError", "VideoPlan", "frame_times", "main", "render_frame"]
 
-#: ``ControllerState.mode`` names.
-MODE_NAMES = {0: "WAITING", 1: "ROLLING", 2: "BALL_LOST", 3: "FAULT"}
+#: ``ControllerState.mode`` code -> name, from the message definition's constants.
+MODE_NAMES = {getattr(ControllerState, n): n for n in ("WAITING", "ROLLING", "BALL_LOST",
+                                                        "FAULT")}
 _NS = 1_000_000_000
 _GIF_MAX_BYTES = 1 << 30  # frames a GIF holds in memory before it is written
 
