@@ -28,7 +28,6 @@ from sensor_msgs.msg import JointState
 from test_nodes_camera import NS, CameraRig
 from visualization_msgs.msg import ImageMarker, Marker, MarkerArray
 
-
 STANDIN = Path(__file__).resolve().parent / "independent" / "standin_node.py"
 
 
