@@ -9,7 +9,12 @@ A thin node over :class:`bfr_camera.detector.BallDetector`:
   ``phi = theta + atan2(x, y)``);
 - publishes one ``ball_observation`` (``bfr_interfaces/BallObservation``, reliable) per
   image, stamped with the image's stamp (the exposure mid-time). The detector keeps the last
-  fix and searches a region of interest around it first.
+  fix and searches a region of interest around it first;
+- at ``markers.rate`` Hz of the images' stamps (0: off, as in hardware.yaml), what it saw for
+  Foxglove and RViz: ``ball_markers`` (``visualization_msgs/MarkerArray``, frame ``world``: a
+  sphere of the ball's size at the fix, deleted when no ball is found) and
+  ``camera/detection`` (``visualization_msgs/ImageMarker``: a circle round the ball on the
+  image, in the image's frame and stamp).
 
 Bad input never stops the node: an image it cannot use (encoding, size, step, a size that
 does not match the calibration, a non-finite theta) gives an observation with status
@@ -30,6 +35,8 @@ from typing import Any
 
 from bfr_model.param_file import check, config_path
 from bfr_model.params import default_params_path
+from bfr_model.scene import fix_markers
+from bfr_ros.markers import MARKER_QOS, MarkerPublisher, image_circle
 from bfr_ros.node_common import (
     IMAGE_QOS,
     JOINT_STATES_QOS,
@@ -44,6 +51,7 @@ from bfr_ros.node_common import (
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from visualization_msgs.msg import ImageMarker
 
 from bfr_camera.calibration import (
     CameraModel,
@@ -139,6 +147,9 @@ class CameraNode(Node):
         self.theta = ThetaBuffer(float(inp["theta_max_gap"]))
         self.frame_timeout = float(inp["frame_timeout"])
         self.obs_pub = self.create_publisher(BallObservation, "ball_observation", STATE_QOS)
+        self.markers = MarkerPublisher(self, "ball_markers", float(p["markers"]["rate"]))
+        self.detection_pub = (self.create_publisher(ImageMarker, "camera/detection", MARKER_QOS)
+                              if self.markers.pub is not None else None)
         self.create_subscription(Image, "camera/image_raw", self._on_image, IMAGE_QOS)
         self.create_subscription(CameraInfo, "camera/camera_info", self._on_info, IMAGE_QOS)
         self.create_subscription(JointState, "joint_states", self._on_joints, JOINT_STATES_QOS)
@@ -236,6 +247,7 @@ class CameraNode(Node):
             out.phi, out.theta_used = float(det.phi), float(det.theta_used)
         out.processing_time = time.perf_counter() - t0
         self.obs_pub.publish(out)
+        self._publish_markers(out, msg)
         self.stats["time"] += out.processing_time
         self.last_reason = ""
         key = {0: "found", 1: "not_found", 2: "ambiguous"}.get(status, "invalid")
@@ -247,6 +259,16 @@ class CameraNode(Node):
                 self.get_logger().warn(f"no ball position: {det.status.name} ({det.reason})",
                                        throttle_duration_sec=1.0)
         self.last_status = status
+
+    def _publish_markers(self, out: BallObservation, img: Image) -> None:
+        """The fix as markers (``markers.rate`` Hz of the image stamps; module docstring)."""
+        if not self.markers.due(stamp_to_ns(out.header.stamp)):
+            return
+        self.markers.publish(fix_markers(out.x, out.y, out.valid, self.ball_radius),
+                             stamp_to_ns(out.header.stamp))
+        if self.detection_pub is not None:
+            self.detection_pub.publish(image_circle(out.u, out.v, out.radius_px, img.header.stamp,
+                                                    img.header.frame_id, out.valid))
 
     def _invalid(self, out: BallObservation, reason: str, t0: float,
                  counted: bool = False) -> None:
