@@ -45,9 +45,9 @@ Hybrid, three modes for the ball (plus NONE, no ball on the rig):
 The frame joint has Coulomb friction that may differ by direction, with stick (Karnopp: the
 frame sticks when its speed crosses zero and breaks away when the torque needed to hold it
 exceeds the Coulomb level), viscous friction, a torque offset, a motor torque gain and an
-imbalance ``m_f e``. Rolling resistance is a couple ``mu_rol N R`` opposing the ball's
-rolling relative to the frame. Slip between ball and frame is not modelled (rolling whenever
-in contact).
+imbalance ``m_f e``. Rolling resistance is a couple ``mu_rol |N| R`` opposing the ball's
+rolling relative to the frame (its sign regularised by ``tanh(psi_dot / 0.01 rad/s)``).
+Slip between ball and frame is not modelled (rolling whenever in contact).
 
 Lagrangian (derived here; ``m`` ball mass, ``J_b`` ball inertia, ``J_f`` frame inertia)
 -------------------------------------------------------------------------------------
@@ -71,7 +71,7 @@ So ``M = [[J_f + m r^2 + J_b, -(m r^2 + J_b l / R)], [., l^2 (m + J_b / R^2)]]``
     M11 th'' + M12 ps'' + M11' th' ps' + M12' ps'^2 + m g r sin(psi - theta)
         = k_u u + tau_0 + m_f e g sin(theta - theta_e) + tau_fric
     M12 th'' + M22 ps'' - 1/2 M11' th'^2 + 1/2 M22' ps'^2 + m g (r' cos - r sin)(psi - theta)
-        = -mu_rol l N tanh(ps' / eps_r)
+        = -mu_rol l |N| tanh(ps' / eps_r)
 
 with ``M11' = 2 m r r'``, ``l' = r' (r + r'') / l``, ``M12' = -(2 m r r' + J_b l' / R)``,
 ``M22' = 2 l l' (m + J_b / R^2)``. The normal force (ball acceleration minus gravity, along
@@ -336,18 +336,22 @@ def offset_curve(params: RigParams, phi: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 @dataclass(frozen=True)
-class Track:
-    """The ball-centre curve ``r(psi)`` of one rig, as C2 quintic Hermite pieces.
+class PeriodicTable:
+    """A smooth 2 pi-periodic function as C2 quintic Hermite pieces on a uniform grid.
 
-    Build it with :meth:`Track.build`. ``eval`` is the scalar fast path used by the
-    integrator; ``eval_array`` the vectorised one.
+    From samples ``f_i = f(2 pi i / n)``: ``f'`` and ``f''`` by FFT (spectral derivatives);
+    each interval's quintic matches ``f, f', f''`` at both ends; in the local variable
+    ``t in [0, 1]`` with ``A = f1 - f0 - d0 - s0 / 2``, ``B = d1 - d0 - s0``, ``C = s1 - s0``
+    (``d = h f'``, ``s = h^2 f''``) its coefficients are ``f0, d0, s0 / 2,
+    10A - 4B + C/2, -15A + 7B - C, 6A - 3B + C/2``. The interpolant's own derivatives are
+    returned, so equations of motion built on it are exactly consistent.
 
     Parameters
     ----------
     n : int
-        Number of uniform intervals over ``psi in [0, 2 pi)``.
+        Number of uniform intervals over ``[0, 2 pi)``.
     coeffs : numpy.ndarray
-        (n, 6) polynomial coefficients of ``r`` in the local variable ``t in [0, 1]``.
+        (n, 6) polynomial coefficients per interval.
     """
 
     n: int
@@ -355,14 +359,88 @@ class Track:
     _rows: tuple = field(repr=False, compare=False, default=())
 
     @staticmethod
+    def from_samples(values: np.ndarray) -> PeriodicTable:
+        """Build the table from ``n`` uniform samples over one period.
+
+        Parameters
+        ----------
+        values : numpy.ndarray
+            ``f(2 pi i / n)``, i = 0..n-1.
+
+        Returns
+        -------
+        PeriodicTable
+            The interpolant.
+        """
+        f = np.asarray(values, dtype=float)
+        n = len(f)
+        k = np.fft.rfftfreq(n, d=1.0 / n)
+        spec = np.fft.rfft(f)
+        d1_spec = 1j * k * spec
+        if n % 2 == 0:
+            d1_spec[-1] = 0.0
+        f1 = np.fft.irfft(d1_spec, n)
+        f2 = np.fft.irfft(-(k**2) * spec, n)
+        h = 2 * np.pi / n
+        y0, y1 = f, np.roll(f, -1)
+        d0, dd1 = f1 * h, np.roll(f1, -1) * h
+        s0, s1 = f2 * h * h, np.roll(f2, -1) * h * h
+        A = y1 - y0 - d0 - s0 / 2
+        B = dd1 - d0 - s0
+        C = s1 - s0
+        coeffs = np.stack([y0, d0, s0 / 2, 10 * A - 4 * B + C / 2, -15 * A + 7 * B - C,
+                           6 * A - 3 * B + C / 2], axis=1)
+        return PeriodicTable(n=n, coeffs=coeffs, _rows=tuple(map(tuple, coeffs.tolist())))
+
+    def eval(self, x: float) -> tuple[float, float, float]:
+        """``f(x)``, ``f'(x)``, ``f''(x)`` at one point (scalar fast path; any period)."""
+        u = x * self.n / (2 * math.pi)
+        i = math.floor(u)
+        t = u - i
+        c0, c1, c2, c3, c4, c5 = self._rows[i % self.n]
+        inv_h = self.n / (2 * math.pi)
+        f = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * c5))))
+        f1 = c1 + t * (2 * c2 + t * (3 * c3 + t * (4 * c4 + t * 5 * c5)))
+        f2 = 2 * c2 + t * (6 * c3 + t * (12 * c4 + t * 20 * c5))
+        return f, f1 * inv_h, f2 * inv_h * inv_h
+
+    def eval_array(self, x: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Vectorised :meth:`eval`."""
+        u = np.asarray(x, dtype=float) * self.n / (2 * np.pi)
+        i = np.floor(u)
+        t = u - i
+        c = self.coeffs[i.astype(np.int64) % self.n]
+        inv_h = self.n / (2 * np.pi)
+        f = c[..., 0] + t * (c[..., 1] + t * (c[..., 2] + t * (c[..., 3] + t * (
+            c[..., 4] + t * c[..., 5]))))
+        f1 = c[..., 1] + t * (2 * c[..., 2] + t * (3 * c[..., 3] + t * (4 * c[..., 4]
+                                                                      + t * 5 * c[..., 5])))
+        f2 = 2 * c[..., 2] + t * (6 * c[..., 3] + t * (12 * c[..., 4] + t * 20 * c[..., 5]))
+        return f, f1 * inv_h, f2 * inv_h**2
+
+
+@dataclass(frozen=True)
+class Track:
+    """The ball-centre curve ``r(psi)`` of one rig (a :class:`PeriodicTable`).
+
+    Build it with :meth:`Track.build`. ``eval`` is the scalar fast path used by the
+    integrator; ``eval_array`` the vectorised one.
+
+    Parameters
+    ----------
+    table : PeriodicTable
+        ``r(psi)`` [m].
+    """
+
+    table: PeriodicTable
+
+    @staticmethod
     def build(params: RigParams, n: int = 4096) -> Track:
         """Tabulate ``r(psi)`` for a rig.
 
         ``psi(phi) = atan2(p_x, p_y)`` is inverted on the uniform grid ``psi_i = 2 pi i / n``
         by Newton's method (``dpsi/dphi = -(p x p') / |p|^2``), from a dense-table guess;
-        ``r' , r''`` come from the FFT of ``r_i``; each interval's quintic matches
-        ``r, r', r''`` at both ends (coefficients ``c3 = 10A - 4B + C/2``,
-        ``c4 = -15A + 7B - C``, ``c5 = 6A - 3B + C/2``).
+        then :meth:`PeriodicTable.from_samples`.
 
         Parameters
         ----------
@@ -405,77 +483,49 @@ class Track:
             if np.max(np.abs(err)) < 1e-14:
                 break
         _, pp, _, _ = offset_curve(params, phi)
-        r = np.hypot(pp[:, 0], pp[:, 1])
-        k = np.fft.rfftfreq(n, d=1.0 / n)
-        spec = np.fft.rfft(r)
-        d1_spec = 1j * k * spec
-        if n % 2 == 0:
-            d1_spec[-1] = 0.0
-        r1 = np.fft.irfft(d1_spec, n)
-        r2 = np.fft.irfft(-(k**2) * spec, n)
-        h = 2 * np.pi / n
-        y0, y1 = r, np.roll(r, -1)
-        d0, dd1 = r1 * h, np.roll(r1, -1) * h
-        s0, s1 = r2 * h * h, np.roll(r2, -1) * h * h
-        A = y1 - y0 - d0 - s0 / 2
-        B = dd1 - d0 - s0
-        C = s1 - s0
-        coeffs = np.stack([y0, d0, s0 / 2, 10 * A - 4 * B + C / 2, -15 * A + 7 * B - C,
-                           6 * A - 3 * B + C / 2], axis=1)
-        return Track(n=n, coeffs=coeffs, _rows=tuple(map(tuple, coeffs.tolist())))
+        return Track(table=PeriodicTable.from_samples(np.hypot(pp[:, 0], pp[:, 1])))
 
     def eval(self, psi: float) -> tuple[float, float, float]:
-        """``r(psi)``, ``r'(psi)``, ``r''(psi)`` at one angle (scalar fast path).
+        """``r(psi)`` [m], ``r'(psi)`` [m/rad], ``r''(psi)`` [m/rad^2] at one angle [rad]."""
+        return self.table.eval(psi)
+
+    def eval_array(self, psi: np.ndarray) -> tuple[np.ndarray, ...]:
+        """Vectorised :meth:`eval`."""
+        return self.table.eval_array(psi)
+
+    def point(self, psi: float) -> tuple[float, float]:
+        """Ball-centre point ``p(psi) = r [sin psi, cos psi]`` in frame coordinates [m]."""
+        r = self.table.eval(psi)[0]
+        return r * math.sin(psi), r * math.cos(psi)
+
+    def tangent_angle(self, psi: float) -> tuple[float, float, float]:
+        """World-free angle of the clockwise tangent ``p'`` and its first two derivatives.
+
+        ``p' = r' e + r f``; its angle from the frame's +x axis (counter-clockwise) is
+        ``alpha = atan2(r' cos psi - r sin psi, r' sin psi + r cos psi) = -psi + atan2(r', r)``
+        (so ``alpha = -psi`` on a circle); ``beta = atan2(r', r)`` has
+        ``beta' = (r r'' - r'^2) / (r^2 + r'^2)`` and
+        the second derivative comes from a central difference of ``beta'``.
 
         Parameters
         ----------
         psi : float
-            Ball-centre angle [rad] (any turn).
+            Ball-centre angle [rad].
 
         Returns
         -------
         tuple of float
-            ``r`` [m], ``r'`` [m/rad], ``r''`` [m/rad^2].
+            ``alpha`` [rad] (continuous in psi), ``alpha'`` [-], ``alpha''`` [1/rad].
         """
-        x = psi * self.n / (2 * math.pi)
-        i = math.floor(x)
-        t = x - i
-        c0, c1, c2, c3, c4, c5 = self._rows[i % self.n]
-        inv_h = self.n / (2 * math.pi)
-        r = c0 + t * (c1 + t * (c2 + t * (c3 + t * (c4 + t * c5))))
-        r1 = c1 + t * (2 * c2 + t * (3 * c3 + t * (4 * c4 + t * 5 * c5)))
-        r2 = 2 * c2 + t * (6 * c3 + t * (12 * c4 + t * 20 * c5))
-        return r, r1 * inv_h, r2 * inv_h * inv_h
-
-    def eval_array(self, psi: np.ndarray) -> tuple[np.ndarray, ...]:
-        """Vectorised :meth:`eval`.
-
-        Parameters
-        ----------
-        psi : numpy.ndarray
-            Ball-centre angles [rad].
-
-        Returns
-        -------
-        tuple of numpy.ndarray
-            ``r`` [m], ``r'`` [m/rad], ``r''`` [m/rad^2].
-        """
-        x = np.asarray(psi, dtype=float) * self.n / (2 * np.pi)
-        i = np.floor(x)
-        t = x - i
-        c = self.coeffs[i.astype(np.int64) % self.n]
-        inv_h = self.n / (2 * np.pi)
-        r = c[..., 0] + t * (c[..., 1] + t * (c[..., 2] + t * (c[..., 3] + t * (
-            c[..., 4] + t * c[..., 5]))))
-        r1 = c[..., 1] + t * (2 * c[..., 2] + t * (3 * c[..., 3] + t * (4 * c[..., 4]
-                                                                      + t * 5 * c[..., 5])))
-        r2 = 2 * c[..., 2] + t * (6 * c[..., 3] + t * (12 * c[..., 4] + t * 20 * c[..., 5]))
-        return r, r1 * inv_h, r2 * inv_h**2
-
-    def point(self, psi: float) -> tuple[float, float]:
-        """Ball-centre point ``p(psi) = r [sin psi, cos psi]`` in frame coordinates [m]."""
-        r = self.eval(psi)[0]
-        return r * math.sin(psi), r * math.cos(psi)
+        r, r1, r2 = self.table.eval(psi)
+        beta = math.atan2(r1, r)
+        d_beta = (r * r2 - r1 * r1) / (r * r + r1 * r1)
+        eps = 1e-4
+        ra, ra1, ra2 = self.table.eval(psi + eps)
+        rb, rb1, rb2 = self.table.eval(psi - eps)
+        dd_beta = ((ra * ra2 - ra1 * ra1) / (ra * ra + ra1 * ra1)
+                   - (rb * rb2 - rb1 * rb1) / (rb * rb + rb1 * rb1)) / (2 * eps)
+        return -psi + beta, -1.0 + d_beta, dd_beta
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -630,7 +680,7 @@ class Plant:
         roll = P.rolling_resistance * ell * math.tanh(psd / ROLL_SIGN_SPEED)
         if self.stuck:
             N = n0
-            q = -roll * N
+            q = -roll * abs(N)
             psdd = (q - h2) / M22
             tau_f = M12 * psdd + h1 - u_a - tau_imb
             return 0.0, psdd, N, q, tau_f, ell
@@ -644,7 +694,7 @@ class Plant:
             thdd = (b1 * M22 - M12 * b2) / det
             psdd = (M11 * b2 - M12 * b1) / det
             N = n0 + n_th * thdd
-            q = -roll * N
+            q = -roll * abs(N)
         return thdd, psdd, N, q, tau_f, ell
 
     def _step_rolling(self, h: float) -> None:
@@ -673,6 +723,36 @@ class Plant:
         self.spin_rate = self.theta_dot - ell * self.psi_dot / R
         if N < 0.0 and self.lift_off:
             self._lift_off()
+
+    def rolling_accelerations(self, theta: float, psi: float, theta_dot: float,
+                              psi_dot: float, torque: float) -> tuple[float, float, float]:
+        """Accelerations and normal force in contact, the frame free to turn.
+
+        For a model-based controller: joint friction, stick and the motor's gain and
+        offset of this plant's parameters apply as they are (a lossless copy has none).
+
+        Parameters
+        ----------
+        theta, psi : float
+            Frame and ball-centre angles [rad].
+        theta_dot, psi_dot : float
+            Their rates [rad/s].
+        torque : float
+            Torque applied to the frame [N m].
+
+        Returns
+        -------
+        tuple of float
+            ``theta''`` [rad/s^2], ``psi''`` [rad/s^2], normal force [N].
+        """
+        stuck, direction = self.stuck, self.direction
+        self.stuck = False
+        self.direction = 1 if theta_dot >= 0.0 else -1
+        try:
+            thdd, psdd, N = self._contact_rhs(theta, psi, theta_dot, psi_dot, torque)[:3]
+        finally:
+            self.stuck, self.direction = stuck, direction
+        return thdd, psdd, N
 
     # ------------------------------------------------------------------ frame joint
     def _maybe_break_away(self, tau_need: float) -> None:

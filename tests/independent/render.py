@@ -153,6 +153,9 @@ class Renderer:
         Pixel noise standard deviation [DN].
     n_contour : int
         Polygon vertices of a plate's silhouette.
+    occlusion : bool
+        The (opaque) front plate hides the part of the ball inside the contour (about 6 mm
+        of its 33 mm); False draws the whole ball (a transparent front plate).
     """
 
     params: physics.RigParams
@@ -160,6 +163,7 @@ class Renderer:
     rng: np.random.Generator
     noise_std: float = 2.5
     n_contour: int = 360
+    occlusion: bool = True
     _contour: np.ndarray = field(init=False, repr=False)
     _background: np.ndarray = field(init=False, repr=False)
     _noise_pos: list[np.ndarray] = field(init=False, repr=False)
@@ -280,6 +284,8 @@ class Renderer:
         for stop, value in self._detail_spans:
             cv2.fillPoly(img, [uv[2 * n + begin:2 * n + stop]], value, cv2.LINE_AA, _SHIFT)
             begin = stop
+        if ball and not self.occlusion:  # a transparent front plate: the whole ball shows
+            cv2.fillPoly(img, [uv[2 * n + nd:]], 228, cv2.LINE_AA, _SHIFT)
         if self.noise_std > 0.0:
             k = int(self.rng.integers(len(self._noise_pos)))
             cv2.add(img, self._noise_pos[k], dst=img)

@@ -90,6 +90,8 @@ class StandInConfig:
         Delay from exposure mid-time to publication [s, simulated].
     camera_noise : float
         Pixel noise [DN].
+    camera_occlusion : bool
+        The front plate hides the inner part of the ball (False: a transparent plate).
     torque_limit : float
         Actuator clamp [N m].
     command_timeout : float
@@ -118,6 +120,7 @@ class StandInConfig:
     frame_rate: float = 200.0
     camera_latency: float = 0.004
     camera_noise: float = 2.5
+    camera_occlusion: bool = True
     torque_limit: float = 0.1
     command_timeout: float = 0.05
     physics_dt: float = 1e-3
@@ -164,7 +167,7 @@ PARAMETERS: dict[str, Any] = {
     "effects.bump_height": 3e-4, "effects.bump_width": 4e-3, "effects.camera_latency": 0.004,
     "joint_states.rate": 1000.0, "encoder.counts_per_rev": 16384,
     "encoder.velocity_window": 2, "encoder.velocity_filter": 0.0,
-    "camera.frame_rate": 200.0, "camera.noise": 2.5,
+    "camera.frame_rate": 200.0, "camera.noise": 2.5, "camera.occlusion": True,
     "camera.position": list(render.CameraModel().position),
     "camera.look_at": list(render.CameraModel().look_at), "camera.roll": render.CameraModel().roll,
     "actuator.torque_limit": 0.1, "command.timeout": 0.05, "physics.dt": 1e-3,
@@ -262,6 +265,7 @@ def config_from_values(values: dict[str, Any]) -> StandInConfig:
         ball_angle=v["initial.ball_angle"], ball_angle_dot=v["initial.ball_angle_dot"],
         joint_rate=v["joint_states.rate"], frame_rate=v["camera.frame_rate"],
         camera_latency=v["effects.camera_latency"], camera_noise=v["camera.noise"],
+        camera_occlusion=v["camera.occlusion"],
         torque_limit=v["actuator.torque_limit"], command_timeout=v["command.timeout"],
         physics_dt=v["physics.dt"], camera_params_out=v["camera_params_out"],
         truth_out=v["truth_out"], status_period=v["status_period"], bumps=bumps)
@@ -291,8 +295,8 @@ def camera_parameter_yaml(camera: render.CameraModel, frame_rate: float) -> str:
     q = camera.quaternion_xyzw()
     k = camera.k_matrix.reshape(-1).tolist()
 
-    def fmt(values: Any) -> str:
-        return "[" + ", ".join(f"{float(x):.9g}" for x in values) + "]"
+    def fmt(values: Any) -> str:  # always with a decimal point: rcl wants one type per list
+        return "[" + ", ".join(repr(float(x)) for x in values) + "]"
 
     return (
         "# Camera of the independent Butterfly rig (tests/independent/standin_node.py).\n"
@@ -303,8 +307,8 @@ def camera_parameter_yaml(camera: render.CameraModel, frame_rate: float) -> str:
         "    camera:\n"
         f"      position: {fmt(camera.position)}  # [m]\n"
         f"      orientation: {fmt(q)}  # [-] quaternion x y z w\n"
-        f"      exposure_time: {camera.exposure_time:.9g}  # [s]\n"
-        f"      frame_rate: {frame_rate:.9g}  # [Hz]\n"
+        f"      exposure_time: {float(camera.exposure_time)!r}  # [s]\n"
+        f"      frame_rate: {float(frame_rate)!r}  # [Hz]\n"
         f"      width: {camera.width}  # [px]\n"
         f"      height: {camera.height}  # [px]\n"
         f"      k: {fmt(k)}  # [px]\n"
@@ -361,7 +365,8 @@ class StandIn:
             ball_angle=config.ball_angle, ball_angle_dot=config.ball_angle_dot,
             frame_locked=config.frame_locked, dt=config.physics_dt)
         self.renderer = render.Renderer(config.rig, config.camera, self.rng,
-                                        noise_std=config.camera_noise)
+                                        noise_std=config.camera_noise,
+                                        occlusion=config.camera_occlusion)
         self.encoder = sensors.Encoder(config.encoder, 1.0 / config.joint_rate)
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE,
                               history=HistoryPolicy.KEEP_LAST)

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import rclpy
 import rosutil
 import yaml
 from rclpy.qos import (
@@ -74,7 +75,11 @@ def test_contract_command_response_and_clean_stop(ros_harness: rosutil.RosHarnes
     for sub in subs:
         h.wait_for_match(sub, timeout=20.0)
     h.wait_for_match(pub, timeout=20.0)
-    h.spin_for(1.5)
+    # collect for at least 3 s of wall time (the clock rate below), and enough messages
+    start_wall = time.monotonic()
+    assert h.spin_until(lambda: time.monotonic() - start_wall > 3.0 and len(got["js"]) > 300
+                        and len(got["img"]) > 60 and len(got["clock"]) > 300, timeout=30.0)
+    h.node.destroy_subscription(subs[1])  # the images are the bulk of this test's load
     out = node.output()
 
     # --- types and QoS as the contract says
@@ -107,17 +112,20 @@ def test_contract_command_response_and_clean_stop(ros_harness: rosutil.RosHarnes
     assert len(img.data) == 640 * 480
     img_stamps = np.array([_t(m.header.stamp) for m in got["img"]])
     assert np.median(np.diff(img_stamps)) == pytest.approx(5e-3, abs=1e-9)
+    # camera_info carries its image's stamp (both best effort: under load one may drop)
     info_stamps = {_t(m.header.stamp) for m in got["info"]}
-    assert set(img_stamps) <= info_stamps | {img_stamps[-1]}
+    assert np.mean([s in info_stamps for s in img_stamps]) > 0.8
+    assert all(abs(s * 200 - round(s * 200)) < 1e-6 for s in info_stamps)
     info = got["info"][-1]
     assert info.distortion_model == "plumb_bob" and len(info.d) == 5
     assert np.count_nonzero(info.d) >= 3 and (info.width, info.height) == (640, 480)
     assert info.header.frame_id == img.header.frame_id == "camera_optical_frame"
 
-    # --- /clock advances at time_scale (0.5) of the wall clock (loaded machine: 20 %)
+    # --- /clock advances at time_scale (0.5) of the wall clock, not at 1 and not in
+    # lock-step (a loose bound: the machine is shared and the receiving side lags under load)
     clock = got["clock"]
-    (w0, c0), (w1, c1) = clock[len(clock) // 4], clock[-1]
-    assert (_t(c1.clock) - _t(c0.clock)) / (w1 - w0) == pytest.approx(0.5, rel=0.2)
+    (w0, c0), (w1, c1) = clock[len(clock) // 5], clock[-1]
+    assert (_t(c1.clock) - _t(c0.clock)) / (w1 - w0) == pytest.approx(0.5, rel=0.4)
 
     # --- the camera parameter file describes the camera the images come from
     params = yaml.safe_load(cam_yaml.read_text())["/**"]["ros__parameters"]
@@ -127,19 +135,33 @@ def test_contract_command_response_and_clean_stop(ros_harness: rosutil.RosHarnes
     q = np.array(params["camera"]["orientation"])
     assert np.linalg.norm(q) == pytest.approx(1.0)
     assert params["input"]["use_camera_info"] is True
+    # ... and rcl itself accepts it as a parameter file (one type per list, etc.)
+    check = rclpy.Context()
+    rclpy.init(args=["--ros-args", "--params-file", str(cam_yaml)], context=check)
+    rclpy.shutdown(context=check)
 
     # --- command response: 0.05 N m on the bare frame (no friction) accelerates it at u / J_f
-    def command(value: float, seconds: float) -> list:
+    def command(value: float, samples: int, timeout: float = 20.0) -> list:
+        """Publish ``value`` at ~100 Hz until ``samples`` consecutive samples apply it."""
         start = len(got["js"])
-        end = time.monotonic() + seconds
         msg = Float64MultiArray(data=[value])
-        while time.monotonic() < end:
+
+        def applied() -> list:
+            run: list = []
+            for _, m in got["js"][start:]:
+                ok = m.effort[0] == min(value, 0.1) and (
+                    not run or round((_t(m.header.stamp) - _t(run[-1].header.stamp)) * 1e3) == 1)
+                run = [*run, m] if ok else ([m] if m.effort[0] == min(value, 0.1) else [])
+            return run
+
+        end = time.monotonic() + timeout
+        while time.monotonic() < end and len(applied()) < samples:
             pub.publish(msg)
             h.spin_for(0.01)
-        return [m for _, m in got["js"][start:]]
+        return applied()
 
-    driven = [m for m in command(0.05, 1.0) if m.effort[0] == 0.05]
-    assert len(driven) > 200, out
+    driven = command(0.05, 300)
+    assert len(driven) >= 300, out
     t = np.array([_t(m.header.stamp) for m in driven])
     theta = np.array([m.position[0] for m in driven])
     acc = 2 * np.polyfit(t - t[0], theta, 2)[0]
@@ -147,11 +169,12 @@ def test_contract_command_response_and_clean_stop(ros_harness: rosutil.RosHarnes
     assert driven[-1].velocity[0] == pytest.approx(acc * (t[-1] - t[0]) + driven[0].velocity[0],
                                                    rel=0.02)
     # clamped to 0.1 N m
-    clamped = [m for m in command(1.0, 0.5) if m.effort[0] != 0.05]
-    assert clamped and max(m.effort[0] for m in clamped) == 0.1
+    clamped = command(1.0, 20)
+    assert len(clamped) >= 20 and all(m.effort[0] == 0.1 for m in clamped)
     # silence: zero effort after command.timeout, the frame coasts at constant speed
     start = len(got["js"])
     h.spin_for(0.5)
+    assert h.spin_until(lambda: len(got["js"]) - start > 200, timeout=20.0)
     coast = [m for _, m in got["js"][start:]][-100:]
     assert all(m.effort[0] == 0.0 for m in coast)
     t = np.array([_t(m.header.stamp) for m in coast])
@@ -172,7 +195,7 @@ def test_contract_command_response_and_clean_stop(ros_harness: rosutil.RosHarnes
                                 "ball_angle_dot", "in_contact")
     assert len(data) > 1000 and np.all(np.diff(data["t"]) > 0)
     assert np.all(np.isnan(data["ball_x"])) and np.all(data["in_contact"] == 0)
-    assert data["theta_dot"].max() > 20.0
+    assert data["theta_dot"].max() > 0.05 / J_F * 0.25  # driven for >= 0.3 s of sim time
 
 
 def test_ball_on_the_rig_is_seen_rolling(ros_harness: rosutil.RosHarness,

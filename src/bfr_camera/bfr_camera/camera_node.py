@@ -10,7 +10,12 @@ A thin node over :class:`bfr_camera.detector.BallDetector`:
   1: after a stall the node measures the present image, it never works through a backlog);
 - publishes one ``ball_observation`` (``bfr_interfaces/BallObservation``, reliable) per
   image it measures, stamped with the image's stamp (the exposure mid-time). The detector
-  keeps the last fix and searches a region of interest around it first.
+  keeps the last fix and searches a region of interest around it first;
+- at ``markers.rate`` Hz of the images' stamps (0: off, as in hardware.yaml), what it saw for
+  Foxglove and RViz: ``ball_markers`` (``visualization_msgs/MarkerArray``, frame ``world``: a
+  sphere of the ball's size at the fix, deleted when no ball is found) and
+  ``camera/detection`` (``visualization_msgs/ImageMarker``: a circle round the ball on the
+  image, in the image's frame and stamp).
 
 Calibration. With ``input.use_camera_info: true`` (the default) the node measures nothing
 until the first valid ``camera_info`` has arrived: an image before it gives an
@@ -43,6 +48,8 @@ import numpy as np
 from bfr_model.dynamics import RigidModel
 from bfr_model.param_file import check, config_path
 from bfr_model.params import RigParams, default_params_path, params_from_dict
+from bfr_model.scene import fix_markers
+from bfr_ros.markers import MARKER_QOS, MarkerPublisher, image_circle
 from bfr_ros.node_common import (
     IMAGE_SUB_QOS,
     JOINT_STATES_QOS,
@@ -61,6 +68,7 @@ from bfr_ros.node_common import (
 )
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from visualization_msgs.msg import ImageMarker
 
 from bfr_camera.calibration import (
     CameraModel,
@@ -180,6 +188,9 @@ class CameraNode(Node):
         check(self.frame_timeout > 0, "input.frame_timeout",
               f"must be > 0 s, got {self.frame_timeout}")
         self.obs_pub = self.create_publisher(BallObservation, "ball_observation", STATE_QOS)
+        self.markers = MarkerPublisher(self, "ball_markers", float(p["markers"]["rate"]))
+        self.detection_pub = (self.create_publisher(ImageMarker, "camera/detection", MARKER_QOS)
+                              if self.markers.pub is not None else None)
         # images and joint_states arrive serialized and are parsed here (RawImage,
         # parse_joint_state): no Python message object per image or encoder sample
         self.image_sub = self.create_subscription(Image, "camera/image_raw", self._on_image,
@@ -323,6 +334,7 @@ class CameraNode(Node):
         out.processing_time = time.perf_counter() - t0
         self.obs_pub.publish(out)
         self.stats["published"] += 1
+        self._publish_markers(out, msg)
         self.stats["time"] += out.processing_time
         self.last_reason = ""
         key = {0: "found", 1: "not_found", 2: "ambiguous"}.get(status, "invalid")
@@ -335,6 +347,16 @@ class CameraNode(Node):
                     self.get_logger().warn(f"no ball position: {det.status.name} "
                                            f"({det.reason})")
         self.last_status = status
+
+    def _publish_markers(self, out: BallObservation, img: RawImage) -> None:
+        """The fix as markers (``markers.rate`` Hz of the image stamps; module docstring)."""
+        if not self.markers.due(img.stamp_ns):
+            return
+        self.markers.publish(fix_markers(out.x, out.y, out.valid, self.ball_radius),
+                             img.stamp_ns)
+        if self.detection_pub is not None:
+            self.detection_pub.publish(image_circle(out.u, out.v, out.radius_px, out.header.stamp,
+                                                    img.frame_id, out.valid))
 
     def _invalid(self, out: BallObservation, reason: str, t0: float,
                  counted: bool = False) -> None:

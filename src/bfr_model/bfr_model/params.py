@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+
 from bfr_model.geometry import OffsetCurve
 from bfr_model.param_file import (
     ParameterError,

@@ -49,9 +49,10 @@ from typing import Any
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
+
 from bfr_model.geometry import OffsetCurve, contour_kernel
 from bfr_model.params import ParameterError, RigParams, default_params_path, params_to_ros_yaml
-from numpy.typing import NDArray
 
 __all__ = [
     "PERTURBATIONS",

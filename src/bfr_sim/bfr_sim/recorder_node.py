@@ -58,6 +58,9 @@ CONTRACT_TYPES: dict[str, str] = {
     "camera/camera_info": "sensor_msgs/msg/CameraInfo",
     "camera/image_raw": "sensor_msgs/msg/Image",
     "clock": "rosgraph_msgs/msg/Clock",
+    "sim_markers": "visualization_msgs/msg/MarkerArray",
+    "ball_markers": "visualization_msgs/msg/MarkerArray",
+    "camera/detection": "visualization_msgs/msg/ImageMarker",
 }
 
 

@@ -13,6 +13,7 @@ topic                             type                                 direction
 ``camera/camera_info``            ``sensor_msgs/CameraInfo``           out (camera rate)
 ``sim_truth``                     ``bfr_interfaces/SimTruth``          out (optional)
 ``/clock``                        ``rosgraph_msgs/Clock``              out
+``sim_markers``                   ``visualization_msgs/MarkerArray``   out (``markers.rate``)
 ``effort_controller/commands``    ``std_msgs/Float64MultiArray``       in (never published)
 ``controller_state``              ``bfr_interfaces/ControllerState``   in (lock-step only)
 ================================  ===================================  ===================
@@ -62,6 +63,8 @@ from bfr_model.dynamics import RigidModel, curve_terms
 from bfr_model.layout import I_CW, I_SW
 from bfr_model.param_file import check, config_path, nonnegative, one_of, positive
 from bfr_model.params import RigParams, default_params_path, params_from_dict
+from bfr_model.scene import MarkerSpec, rig_markers, rig_picture
+from bfr_ros.markers import MarkerPublisher
 from bfr_ros.node_common import (
     CLOCK_QOS,
     COMMAND_QOS,
@@ -332,6 +335,8 @@ class SimulatorNode(Node):
         self.info_pub = self.create_publisher(CameraInfo, "camera/camera_info", IMAGE_QOS)
         self.truth_pub = self.create_publisher(SimTruth, "sim_truth", STATE_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", CLOCK_QOS)
+        mk = p["markers"]  # the scene for Foxglove / RViz (bfr_model.scene); rate 0: off
+        self.markers = MarkerPublisher(self, "sim_markers", float(mk["rate"]), str(mk["frame_id"]))
         self.cmd_sub = self.create_subscription(
             Float64MultiArray, "effort_controller/commands", self._on_command, COMMAND_QOS)
         # controller_state is read in lock-step only (the answer to a frame); the start waits
@@ -442,9 +447,22 @@ class SimulatorNode(Node):
         self.info_pub.publish(info)
         self.stats["frames"] += 1
 
+    def scene_markers(self) -> list[MarkerSpec]:
+        """The markers of the current state: frame, ball (the truth's centre), contacts, label."""
+        ball, _ = self.sim.ball_kinematics()
+        x = self.sim.x
+        b = self.rig_params.ball
+        pic = rig_picture(self.sim.model.curve, float(x[0]), phi=float(x[1]), ball_xy=ball[:2],
+                          ball_z=float(ball[2]), ball_radius=b.radius,
+                          plate_distance=b.plate_distance)
+        return rig_markers(pic, label=f"t {self.sim.t:.2f} s  torque "
+                                      f"{self.sim.applied_torque:+.4f} N m")
+
     def publish_due(self) -> bool:
         """Publish what is due at the current step; True if a frame went out."""
         t_ns = self.sim.t_ns
+        if self.markers.due(t_ns):
+            self.markers.publish(self.scene_markers(), t_ns)
         if self.pub_images and self.frame_sched.due(t_ns):
             self._render(t_ns)
         frame_out = bool(self.pending) and self.pending[0][0] <= t_ns
