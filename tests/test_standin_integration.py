@@ -7,9 +7,8 @@ rig: ``joint_states`` at 1 kHz, images at 200 Hz published a few ms after their 
 ``/clock`` at half real time, no lock-step. Our nodes run as ``ros2 run`` runs them, with
 ``use_sim_time``; the camera node gets the stand-in's camera pose (off the shipped one) as
 parameter overrides, the way docs/hardware.md says: the stand-in writes its camera as a
-parameter file, whose pose entries are passed with ``-p`` (the file itself mixes integers
-and floats in ``camera.k``, which rcl's parameter-file parser refuses: "Sequence should be
-of same type"; the intrinsics are not needed anyway, they come from camera_info). The ball
+parameter file, given with ``--params-file`` (its intrinsics are only the defaults until
+the first camera_info arrives: the node measures nothing before it). The ball
 is started on the controller's periodic orbit, computed with the project's own orbit code
 and converted to the stand-in's convention (the ball centre's polar angle).
 
@@ -111,15 +110,9 @@ class Watch:
 
 
 def camera_args(camera_yaml: Path) -> list[str]:
-    """``-p`` overrides of the camera's pose and timing from the stand-in's file."""
-    cam = load_ros_parameters(camera_yaml)["camera"]
-    out = ["-p", "use_sim_time:=true", "-p", "input.use_camera_info:=true"]
-    for key in ("position", "orientation", "exposure_time", "frame_rate"):
-        v = cam[key]
-        text = "[" + ", ".join(repr(float(x)) for x in v) + "]" if isinstance(v, list) \
-            else repr(float(v))
-        out += ["-p", f"camera.{key}:={text}"]
-    return out
+    """The camera node's ROS arguments: the stand-in's camera file, simulated time."""
+    assert "position" in load_ros_parameters(camera_yaml)["camera"]
+    return ["--params-file", str(camera_yaml), "-p", "use_sim_time:=true"]
 
 
 def start_nodes(node_processes, h: rosutil.RosHarness, camera_yaml: Path,  # noqa: ANN001
