@@ -43,7 +43,8 @@ def test_camera_node_markers(ros_harness: rosutil.RosHarness, node_processes) ->
     sub = h.node.create_subscription(MarkerArray, "ball_markers", arrays.append, 10)
     sub2 = h.node.create_subscription(ImageMarker, "camera/detection", circles.append, 10)
     cam = node_processes.start("bfr_camera", "camera_node",
-                               ros_args=["-p", "input.frame_timeout:=5.0"])
+                               ros_args=["-p", "input.frame_timeout:=5.0",
+                                         "-p", "input.use_camera_info:=false"])
     for endpoint in (rig.img_pub, rig.js_pub, rig.sub, sub, sub2):
         h.wait_for_match(endpoint, timeout=60)
     warm, _ = rig.render(0.0, 0.3)

@@ -19,10 +19,10 @@ and converted to the stand-in's convention (the ball centre's polar angle).
 The stand-in starts its physics at once, without waiting for subscribers, so the first
 few hundred milliseconds of simulated time may pass before DDS discovery has matched its
 publishers to our nodes: left alone that long, the ball falls off. A run whose first
-joint_states sample reached the controller later than 0.2 s of simulated time is therefore
-repeated (up to three runs; it says so). Discovery of the image topic takes 0.1-2 s of
-wall time here under load, so both tests run the stand-in at a quarter of real time
-(``time_scale`` 0.25).
+joint_states sample reached the controller later than 0.3 s of simulated time is therefore
+repeated (up to three runs; it says so). Discovery takes 0.1-2.5 s of wall time here (the
+longer inside the whole suite, whose earlier tests leave participants behind), so both
+tests run the stand-in at a tenth of real time (``time_scale`` 0.1).
 2. The camera node is killed mid-run and started again: the controller rides the gap up to
    its bound, then reports BALL_LOST with zero torque (never dies, never a stale fix), the
    new camera node takes up its calibration from camera_info and measures again, and the
@@ -146,8 +146,8 @@ def test_nodes_keep_the_standins_ball_rolling(ros_harness: rosutil.RosHarness,
     watch = Watch(h)
     cam_yaml = camera_file(node_processes, h, tmp_path)
     cam, ctl = start_nodes(node_processes, h, cam_yaml, watch)
-    duration = 6.0
-    scale = 0.25
+    duration = 4.0
+    scale = 0.1
     for attempt in range(3):
         truth_csv = tmp_path / f"truth{attempt}.csv"
         n0 = len(ctl.output())
@@ -160,7 +160,7 @@ def test_nodes_keep_the_standins_ball_rolling(ros_harness: rosutil.RosHarness,
         h.spin_for(0.5)
         first_js = [float(x) for x in re.findall(r"WAITING at t = ([0-9.]+) s: no ball",
                                                  ctl.output()[n0:])]
-        if first_js and first_js[0] <= 0.2:
+        if first_js and first_js[0] <= 0.3:
             break
         print(f"discovery took {first_js[0] if first_js else '?'} s of simulated time: "
               f"the ball was alone; running again")
@@ -181,7 +181,7 @@ def test_nodes_keep_the_standins_ball_rolling(ros_harness: rosutil.RosHarness,
     st = np.array([stamp_ns(s) for s in watch.states]) / NS
     assert modes[-1] == ROLLING and st[-1] > duration - 0.2, ctl.output()[-3000:]
     first = st[np.argmax(modes == ROLLING)]
-    assert first < 0.2
+    assert first < 0.4  # picked up as soon as discovery let the fixes through
     assert not np.any(np.isin(modes[st > first], (BALL_LOST, FAULT))), ctl.output()[-3000:]
     assert max(abs(s.torque) for s in watch.states) <= 0.1 + 1e-12
     # the camera on images it did not render, with intrinsics it got from camera_info only
@@ -217,7 +217,7 @@ def test_camera_killed_and_restarted_mid_run(ros_harness: rosutil.RosHarness,
         watch.states.clear()
         watch.obs.clear()
         rig = node_processes.start_python(str(STANDIN), args=standin_args({
-            "time_scale": 0.25, "duration": 0.0, "seed": 5, **orbit_start_standin(0.3)}))
+            "time_scale": 0.1, "duration": 0.0, "seed": 5, **orbit_start_standin(0.3)}))
         assert h.spin_until(lambda: sim_t() > 1.5, timeout=120), rig.output()[-2000:]
         if watch.states[-1].mode == ROLLING:
             break
