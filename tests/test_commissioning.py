@@ -130,11 +130,11 @@ def test_commissioning_loop_on_a_rig_with_every_effect(ros_harness: rosutil.RosH
             "time_scale": 0.1, "duration": duration, "seed": 7, "truth_out": str(truth_csv),
             **EFFECTS, **orbit_start_standin(0.3, c2)}))
         assert wait_exit(rig, h, duration / 0.1 + 120) == 0, rig.output()[-3000:]
-        first = [float(x) for x in re.findall(r"WAITING at t = ([0-9.]+) s: no ball",
-                                              ctl.output())]
-        if first and first[0] <= 0.3:
+        first = [float(x) for x in re.findall(r"ROLLING at t = ([0-9.]+) s", ctl.output())]
+        if first and first[0] <= 0.15:
             break
-        print(f"discovery took {first[0] if first else '?'} s of simulated time; again")
+        print(f"first fix at {first[0] if first else '?'} s of simulated time (discovery); "
+              f"again")
         cam.stop()
         ctl.stop()
     with truth_csv.open() as f:
