@@ -49,9 +49,10 @@ from typing import Any
 
 import numpy as np
 import yaml
+from numpy.typing import NDArray
+
 from bfr_model.geometry import OffsetCurve, contour_kernel
 from bfr_model.params import ParameterError, RigParams, default_params_path, params_to_ros_yaml
-from numpy.typing import NDArray
 
 __all__ = [
     "PERTURBATIONS",
@@ -317,15 +318,23 @@ def rough_track(params: RigParams, rng: np.random.Generator, count: int,
 
 
 def with_asperities(params: RigParams, phi: FloatArray, height: FloatArray, width: FloatArray,
-                    append: bool = True) -> RigParams:
-    """``params`` with the given sharp bumps in ``track.asperity_*`` (added or replacing)."""
+                    append: bool = True, edge: int | FloatArray = 0) -> RigParams:
+    """``params`` with the given sharp bumps in ``track.asperity_*`` (added or replacing).
+
+    ``edge``: the plate edge of the new bumps (0 both, 1 front, 2 back; one value or one per
+    bump), into ``track.asperity_edge``.
+    """
     t = params.track
+    n = len(phi)
+    new_edge = [int(v) for v in np.broadcast_to(np.asarray(edge, int), (n,))]
     ph = [*t.asperity_phi, *phi] if append else list(phi)
     hh = [*t.asperity_height, *height] if append else list(height)
     ww = [*t.asperity_width, *width] if append else list(width)
+    ee = [*t.asperity_edges(), *new_edge] if append else new_edge
     return params.replace(**{"track.asperity_phi": [float(v) for v in ph],
                              "track.asperity_height": [float(v) for v in hh],
-                             "track.asperity_width": [float(v) for v in ww]})
+                             "track.asperity_width": [float(v) for v in ww],
+                             "track.asperity_edge": ee if any(ee) else []})
 
 
 def write_params(params: RigParams, path: str | Path, header: str = "") -> Path:
