@@ -2,30 +2,41 @@
 
 Subcommands::
 
-    bfr analyze energy [--json] [--out-dir DIR] [--params YAML] [--study YAML]
+    bfr analyze energy [RECORDING ...] [--corrected PATH ...] [--diagnose] [--json] ...
     bfr analyze bounce [--json] [--out-dir DIR] [--params YAML] [--study YAML] [--no-contact]
+    bfr analyze edges  [--json] [--out-dir DIR] [--quick] ...
     bfr analyze rough  --count N --seed S --out YAML [--phi-range A B] ...
 
 ``energy`` (seed chapter 2) and ``bounce`` (chapter 3, chapter 4's closest point and
 recommendation 1) evaluate a closed-loop run of the nominal controller on the nominal rigid
 plant (``bfr_control``), print our figures next to the seed's with the relative difference,
 save PNG plots like the seed's figures (``--out-dir``, default ``analysis_out``), and with
-``--json`` print one JSON document instead of the table. ``rough`` draws a seeded rough
-surface into a parameter file. Progress goes to stderr.
+``--json`` print one JSON document instead of the table. ``energy RECORDING...`` does the
+seed's recommendation 2 on real recordings instead (:mod:`.recorded`): motor work against
+the ideal energy input, their discrepancy per turn and over the run beside the chapter-2
+energies, and again with ``bfr diagnose``'s correction (``--corrected`` file or output
+folder, or ``--diagnose`` to run it). ``edges`` answers the seed's recommendation 3 with the
+two-edge contact model (:mod:`.edges`). ``rough`` draws a seeded rough surface into a
+parameter file. Progress goes to stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import io
 import json
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bfr_diagnose.cli import main as diagnose_main
+from bfr_model.io import read_recording
 from bfr_model.params import ParameterError, load_params
 from bfr_model.perturbations import load_study, rough_track, with_asperities, write_params
 
@@ -38,6 +49,7 @@ from bfr_tools.analysis.bounce import (
     taylor_error,
 )
 from bfr_tools.analysis.energy import closed_loop_check, energy_analysis, plot_energy
+from bfr_tools.analysis.recorded import analyze_recording, plot_recorded
 from bfr_tools.analysis.trajectory import closed_loop_rigid, progress
 
 __all__ = ["main"]
@@ -92,8 +104,18 @@ def build_parser() -> argparse.ArgumentParser:
                     "contact and slip over bumps with the discrete and the contact model "
                     "(bounce), seeded rough tracks (rough).")
     sub = p.add_subparsers(dest="cmd", required=True)
-    e = sub.add_parser("energy", help="seed chapter 2: energies, fluctuations, rankings")
+    e = sub.add_parser("energy", help="seed chapter 2: energies, fluctuations, rankings; with "
+                                      "recordings: recommendation 2 on real data")
     _common(e)
+    e.add_argument("recordings", nargs="*", type=Path, metavar="RECORDING",
+                   help="rig logs (.txt), CSV or ROS 2 bags: motor work against the ideal "
+                        "energy input along each (default: a simulated closed-loop run)")
+    e.add_argument("--corrected", nargs="+", type=Path, metavar="PATH",
+                   help="bfr diagnose's correction: its corrected_params.yaml or its "
+                        "--out-dir folder; one for all recordings or one per recording")
+    e.add_argument("--diagnose", action="store_true",
+                   help="run bfr diagnose on each recording for the correction (its outputs "
+                        "go to OUT_DIR/diagnose_<name>)")
     e.add_argument("--closed-loop-check", action="store_true",
                    help="also run the closed loop with each perturbation in the plant")
     b = sub.add_parser("bounce", help="seed chapter 3: paths A/B/C, threshold, slip; "
@@ -142,6 +164,10 @@ def _run(params: Any, study: Any) -> Any:
 def _energy(args: argparse.Namespace) -> int:
 
     params, study = _setup(args)
+    if args.recordings:
+        return _energy_recorded(args, params, study)
+    if args.corrected or args.diagnose:
+        raise ValueError("--corrected and --diagnose need recordings (RECORDING ...)")
     traj = _run(params, study)
     progress("energy terms (seed eqs. 2.1-2.15)")
     rep = energy_analysis(traj, params, study)
@@ -223,6 +249,115 @@ def _energy_table(fig: dict) -> str:
                          f"{v['rms_torque']:11.4g} {v['mean_phi_dot']:13.4g} {state}")
     if "plots" in fig:
         lines += ["", "Plots: " + ", ".join(fig["plots"])]
+    return "\n".join(lines)
+
+
+def _corrected_paths(args: argparse.Namespace) -> list[Path | None]:
+    """The correction file of each recording: given, diagnosed here, or none."""
+    n = len(args.recordings)
+    if args.corrected and args.diagnose:
+        raise ValueError("give --corrected or --diagnose, not both")
+    if args.corrected:
+        if len(args.corrected) not in (1, n):
+            raise ValueError(f"--corrected: {len(args.corrected)} paths for {n} recordings "
+                             "(give one for all or one per recording)")
+        paths = list(args.corrected) * (n if len(args.corrected) == 1 else 1)
+        out: list[Path | None] = []
+        for p in paths:
+            f = p / "corrected_params.yaml" if p.is_dir() else p
+            if not f.is_file():
+                raise ValueError(f"--corrected {p}: no such file"
+                                 + (" (no corrected_params.yaml in the folder)"
+                                    if p.is_dir() else ""))
+            out.append(f)
+        return out
+    if not args.diagnose:
+        return [None] * n
+    out = []
+    for rec in args.recordings:
+        d = args.out_dir / f"diagnose_{rec.stem}"
+        progress(f"bfr diagnose {rec} --out-dir {d}")
+        with contextlib.redirect_stdout(io.StringIO()):  # its report is in d/report.md
+            code = diagnose_main([str(rec), "--out-dir", str(d), "--no-plots", "--quiet"])
+        if code != 0 or not (d / "corrected_params.yaml").is_file():
+            raise ValueError(f"bfr diagnose failed on {rec} (exit {code}); run it alone to "
+                             "see why")
+        out.append(d / "corrected_params.yaml")
+    return out
+
+
+def _energy_recorded(args: argparse.Namespace, params: Any, study: Any) -> int:
+    """``bfr analyze energy RECORDING...``: recommendation 2 on each recording."""
+    for rec in args.recordings:
+        if not rec.exists():
+            raise ValueError(f"{rec}: no such file or directory")
+    corrected = _corrected_paths(args)
+    results = []
+    for rec_path, cor_path in zip(args.recordings, corrected, strict=True):
+        progress(f"energy along {rec_path}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rec = read_recording(rec_path)
+        cor = load_params(cor_path) if cor_path is not None else None
+        res = analyze_recording(rec, params, study, cor, label=str(rec_path),
+                                nominal_source=str(args.params or "rig.yaml"),
+                                corrected_source=str(cor_path or ""))
+        if not args.no_plots:
+            res.figures["plots"] = [str(p) for p in
+                                    plot_recorded(res, args.out_dir, rec_path.stem)]
+        results.append(res.figures)
+    if args.json:
+        print(json.dumps(_clean({"recordings": results}), indent=1))
+        return 0
+    print("\n\n".join(_recorded_table(f) for f in results))
+    return 0
+
+
+def _recorded_table(f: dict) -> str:
+    """The text report of one recording (``bfr analyze energy RECORDING``)."""
+    n = f["nominal"]
+    basis = n["basis"]
+    lines = [
+        f"Energy along {f['recording']} (seed recommendation 2): {f['analysed']:.1f} s of "
+        f"{f['duration']:.1f} s in {f['segments']} segment(s), {f['frame_turns']:.2f} frame "
+        f"turns, {'with' if f['has_ball'] else 'without'} the ball ({f['ball_note']})",
+        f"  {'':26s} {'over the run':>13s} {f'per {basis} (mean +- std)':>26s}",
+    ]
+
+    def row(name: str, b: dict, key: str, total: str) -> str:
+        r = b["rate"][key]
+        per = (f"{r['mean']:+.3e} +- {r['std']:.1e}" if r["std"] is not None else
+               f"{r['mean']:+.3e}" if r["mean"] is not None else "n/a")
+        return f"  {name:26s} {b[total]:+13.4e} {per:>26s}"
+
+    for b in (n, f.get("corrected")):
+        if b is None:
+            continue
+        lines.append(f" {b['label']} model ({b['params']}):")
+        lines.append(row("motor work W_m [J]", b, "motor_work", "motor_work"))
+        lines.append(row("ideal input E_in [J]", b, "energy_in", "energy_in"))
+        lines.append(row("model dissipation [J]", b, "dissipation", "model_dissipation"))
+        lines.append(row("discrepancy [J]", b, "discrepancy", "discrepancy"))
+        eq = b["equivalent"]
+        alone = [f"joint Coulomb friction of {_fmt(v)} N m" if k == "joint_coulomb_torque"
+                 else f"rolling resistance mu_rol = {_fmt(v)}" for k, v in eq.items()
+                 if v is not None]
+        lines.append(f"  mean power: motor {_fmt(b['mean_power']['motor'])} W, discrepancy "
+                     f"{_fmt(b['mean_power']['discrepancy'])} W"
+                     + (f"; alone it would take {' or '.join(alone)}" if alone else "")
+                     + (f"; share left after the correction {_fmt(b['share_left'])}"
+                        if "share_left" in b else ""))
+    pt = f["perturbations"]
+    lines += [f" Chapter-2 energies at the seed's magnitudes along the recording (loss per "
+              f"{basis} {_fmt(pt['measured_loss'])} J, peak-to-peak about its trend "
+              f"{_fmt(pt['measured_amplitude'])} J):",
+              f"  {'term':8s} {f'per {basis} [J]':>14s} {'p-p [J]':>10s}  verdict"]
+    for sym, r in pt["terms"].items():
+        s = r["seed"]
+        lines.append(f"  {sym:8s} {_fmt(s['rate']):>14s} {_fmt(s['amplitude']):>10s}  "
+                     f"{r['verdict']}")
+    if "plots" in f:
+        lines.append(" Plots: " + ", ".join(f["plots"]))
     return "\n".join(lines)
 
 
