@@ -20,6 +20,8 @@ from bfr_model.contact import (
     IWD,
     IWHC,
     IWIN,
+    IWPX,
+    IWPY,
     IX,
     IXI,
     IXI2,
@@ -278,7 +280,7 @@ def test_two_edges_reduce_exactly_to_one() -> None:
         xb = b.step(xb, u, 1e-3)
     assert a.edges == 1 and b.edges == 2
     assert np.array_equal(xa[:IZ], xb[:IZ])
-    assert xb[IZ] == 0.0 and xb[IXI2] == xb[IXI]
+    assert xb[IZ] == 0.0 and xb[IXI2] == xb[IXI] and xb[IWPX] == xb[IWPY] == 0.0
     assert a.diagnostics(xa)["normal_force"] == b.diagnostics(xb)["normal_force"]
 
 
@@ -370,4 +372,4 @@ def test_asperity_edges_are_checked_and_need_two_edges() -> None:
     assert p.track.asperity_edge == (2,)
     with pytest.raises(ValueError, match="two-edge"):
         ContactModel(p, edges=1)
-    assert ContactModel(p).edges == 2 and NX == 16
+    assert ContactModel(p).edges == 2 and NX == 18

@@ -26,11 +26,14 @@ State (world coordinates, DEVELOPERS.md), ``x`` of length :data:`NX`::
     W_hc         energy dissipated by the Hunt-Crossley damping alone [J]
     z, vz        lateral position of the centre, +z towards the front plate [m], [m/s]
     xi2          stick-spring extension at the primary contact of edge 1 [m]
+    wpx, wpy     the ball's angular velocity in the frame's plane (world axes) [rad/s]
 
 Equations of motion (seed eqs. 4.2-4.7, Newton-Euler):
 
     m r_ddot = sum_j F_j - m g_e y,   m z_ddot = sum_j F_z,j,   J_b psi_ddot = sum_j T_j,
-    J_f theta_ddot = k_u u + T_joint + sum_j T_frame,j
+    J_b w_p_dot = sum_j (z_e - z) F_t,j n_j,   J_f theta_ddot = k_u u + T_joint + sum_j T_frame,j
+
+(a sphere: Euler's equations without gyroscopic terms).
 
 Contacts j of an edge are the local minima of the distance d from the ball centre to its
 contour (:mod:`bfr_model.closest_point`, exact Newton, warm-started) within reach; several
@@ -71,12 +74,16 @@ booking the released spring energy as dissipated. Secondary contacts (brief, at 
 use regularised Coulomb friction ``-mu_d F_n tanh(v_slip / v_reg)``. The slip velocity of
 the contact point (ball material point minus frame material point, along the tangent t) is
 
-    v_slip = t . v + omega R_j - theta_dot (c_pt x t)_z,   R_j = R_e + e,  c_pt = c - R_j n
+    v_slip = t . v + omega R_j - theta_dot (c_pt x t)_z + (z_e - z) w_p . n,
+    R_j = R_e + e,  c_pt = c - R_j n
 
 so that rolling without slip is ``omega = theta_dot - s_dot / R`` (DEVELOPERS.md). The
-force ``F_t t`` acts on the ball, ``R_j F_t`` on its spin, ``-(c_pt x F_t t)_z`` on the frame.
-The ball's rotations about in-plane axes (a twist when the two edges pull differently) are
-not modelled.
+force ``F_t t`` acts on the ball, ``R_j F_t`` on its spin, ``(z_e - z) F_t n`` on its
+rotation about the contact normal (yaw, w_p . n), ``-(c_pt x F_t t)_z`` on the frame. The
+yaw is what lets the ball roll on two edges at different radii (one raised by a bump:
+``R_1 - R_2 = (d_f / R) z`` to first order) without slipping on either; with identical edges
+the two yaw torques cancel exactly. Friction across the edges (along z) is not modelled:
+the ball slides sideways freely, held by the normal forces' lateral components.
 
 Rolling resistance: a couple ``-mu_rol F_n R_j tanh(omega_rel / v_r)`` on the ball and its
 reaction on the frame (``omega_rel = omega - theta_dot``; power ``mu_rol F_n |s_dot|`` as the
@@ -84,8 +91,8 @@ rigid model's). Joint friction as the rigid model's, with
 ``F_load = |sum_j F_j + m_f g_e y|`` explicit here.
 
 Energy balance, checked by the tests: ``E_kin + E_pot + E_el - E(0) = W_in - W_diss`` with
-``E_kin`` including ``m vz^2 / 2`` and ``E_el = sum_j s k w_j^(n+1) / (n+1) + sum_e s k_t
-xi_e^2 / 2``.
+``E_kin`` including ``m vz^2 / 2 + J_b |w_p|^2 / 2`` and
+``E_el = sum_j s k w_j^(n+1) / (n+1) + sum_e s k_t xi_e^2 / 2``.
 
 Integration (:func:`contact_steps`): the contact modes are near 1.5 kHz (Hertz stiffness
 at the ball's weight, 3 kHz in a 0.1 m/s impact) and the stick spring near 1.4 kHz; a
@@ -118,7 +125,7 @@ for checks (:meth:`ContactModel.follow` keeps the contact set with the state).
 
 Not modelled: the wobbling frame (``frame.wobble``; the contact model is planar, a shaft
 pitch is the in-plane gravity ``g cos eps``, its lateral component ``g sin eps`` is left
-out), the ball's twist about in-plane axes.
+out), friction across the edges, the elliptic ball's orientation beyond its spin angle.
 """
 
 from __future__ import annotations
@@ -185,7 +192,8 @@ FloatArray = NDArray[np.float64]
 
 # state layout (module docstring)
 IX, IY, IPSI, ITH, IVX, IVY, IOM, ITHD, IXI, IWIN, IWD, ISLIP, IWHC, IZ, IVZ, IXI2 = range(16)
-NX = 16
+IWPX, IWPY = 16, 17
+NX = 18
 # parameter vector: the shared layout of bfr_model.layout (rigid entries + contact block)
 NCMAX = 8  # at most this many simultaneous contact candidates per edge
 # diagnostics layout (contact_eval's diag output); D_E* + e: the primary contact of edge e
@@ -198,17 +206,18 @@ SWAP_DEPTH = 1e-7  # [m] a secondary contact this much deeper than the primary t
 
 @njit_inline
 def _edge_frame(E, e, z, CP):  # noqa: ANN001, ANN202
-    """Force share s, in-plane radius R_e(z) and dR_e/dz of edge e of E (module docstring).
+    """Force share s, in-plane radius R_e(z), dR_e/dz and lateral arm ``z_e - z`` of edge e.
 
     One edge (E = 1) is today's contact: the two identical edges acting together, s = 1,
-    R_e = R. With two, edge 0 is the front plate (z_e = +d_f/2), edge 1 the back one.
+    R_e = R, no arm. With two, edge 0 is the front plate (z_e = +d_f/2), edge 1 the back one
+    (module docstring).
     """
     if E == 1:
-        return 1.0, CP[I_R], 0.0
+        return 1.0, CP[I_R], 0.0, 0.0
     ze = CP[I_ZE] if e == 0 else -CP[I_ZE]
     dz = z - ze
     re = math.sqrt(CP[I_RB] * CP[I_RB] - dz * dz)
-    return 0.5, re, -dz / re
+    return 0.5, re, -dz / re, -dz
 
 
 @njit_inline
@@ -315,12 +324,13 @@ def _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, b
                tphi, th, tw, span, iters, diag):  # noqa: ANN001
     """One edge's contacts: their sums of forces, torques, powers and energies.
 
-    Returns ``(fx, fy, fz, tb, tf, diss, diss_hc, fn_tot, ntouch, e_el, slip, xi_dot)``: force
-    on the ball [N], torques on the ball and the frame [N m], dissipated powers (all, and the
+    Returns ``(fx, fy, fz, tb, tf, tpx, tpy, diss, diss_hc, fn_tot, ntouch, e_el, slip,
+    xi_dot)``: force on the ball [N], torques on the ball (about z, and in the plane: the
+    yaw about the contact normals) and on the frame [N m], dissipated powers (all, and the
     normal damping's) [W], normal force [N], touching contacts, elastic energy [J], the
     primary's slip rate ``v_slip / R_j`` [rad/s] and its stick spring's rate [m/s]. Summed
     per edge, so that two identical edges (each term an exact half) give exactly the sums
-    of one.
+    of one (their yaw torques cancel exactly).
     """
     vx = x[IVX]
     vy = x[IVY]
@@ -328,7 +338,7 @@ def _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, b
     thd = x[ITHD]
     k = CP[I_K]
     nexp = CP[I_NEXP]
-    s, Re, dRe = _edge_frame(E, e, x[IZ], CP)
+    s, Re, dRe, arm = _edge_frame(E, e, x[IZ], CP)
     ixi = IXI if e == 0 else IXI2
     ratio = 1.0 if E == 1 else CP[I_R] / Re  # in-plane friction mu R_b / R_e(z)
     mus = CP[I_MUS] * ratio
@@ -338,6 +348,8 @@ def _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, b
     fz = 0.0
     tb = 0.0
     tf = 0.0
+    tpx = 0.0
+    tpy = 0.0
     diss = 0.0
     diss_hc = 0.0
     fn_tot = 0.0
@@ -358,8 +370,10 @@ def _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, b
             cand[e, j], x, CP, rho0, orders, ccos, csin, bphi, bh, bw, tp, tt, tv, sp, iters)
         w, rj, tx, ty, cpx, cpy, gcx, gcy, gth, gps, gz = _penetration(
             x, CP, Re, dRe, d, cxf, cyf, nfx, nfy, kap, st, ct)
-        # slip velocity: ball material point minus frame material point, along t
-        v_slip = tx * vx + ty * vy + om * rj - thd * (cpx * ty - cpy * tx)
+        # slip velocity: ball material point minus frame material point, along t (the yaw
+        # about the normal n = (-t_y, t_x) moves a contact off the mid-plane along t)
+        v_slip = (tx * vx + ty * vy + om * rj - thd * (cpx * ty - cpy * tx)
+                  + arm * (tx * x[IWPY] - ty * x[IWPX]))
         if j == 0:
             slip = v_slip / rj
             diag[D_EW + e] = w
@@ -396,6 +410,8 @@ def _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, b
         fx += ft * tx
         fy += ft * ty
         tb += rj * ft
+        tpx -= arm * ft * ty
+        tpy += arm * ft * tx
         tf -= ft * (cpx * ty - cpy * tx)
         # rolling resistance couple
         om_rel = om - thd
@@ -403,7 +419,7 @@ def _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, b
         tb += mr
         tf -= mr
         diss -= mr * om_rel
-    return fx, fy, fz, tb, tf, diss, diss_hc, fn_tot, ntouch, e_el, slip, xid0
+    return fx, fy, fz, tb, tf, tpx, tpy, diss, diss_hc, fn_tot, ntouch, e_el, slip, xid0
 
 
 @njit
@@ -428,10 +444,10 @@ def _rhs(x, u, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, bphi, b
     m = CP[I_M]
     g = CP[I_G]
     thd = x[ITHD]
-    fx = fy = fz = tb = tf = diss = diss_hc = fn_tot = ntouch = e_el = slip = 0.0
+    fx = fy = fz = tb = tf = tpx = tpy = diss = diss_hc = fn_tot = ntouch = e_el = slip = 0.0
     dxv[IXI2] = 0.0
     for e in range(E):
-        (pfx, pfy, pfz, ptb, ptf, pdiss, pdhc, pfn, pnt, peel, pslip,
+        (pfx, pfy, pfz, ptb, ptf, ptpx, ptpy, pdiss, pdhc, pfn, pnt, peel, pslip,
          xid) = _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin,
                            bphi, bh, bw, tphi, th, tw, span, iters, diag)
         fx += pfx
@@ -439,6 +455,8 @@ def _rhs(x, u, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, bphi, b
         fz += pfz
         tb += ptb
         tf += ptf
+        tpx += ptpx
+        tpy += ptpy
         diss += pdiss
         diss_hc += pdhc
         fn_tot += pfn
@@ -467,6 +485,8 @@ def _rhs(x, u, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, bphi, b
     dxv[IWHC] = diss_hc
     dxv[IZ] = x[IVZ]
     dxv[IVZ] = fz / m
+    dxv[IWPX] = tpx / CP[I_JB]
+    dxv[IWPY] = tpy / CP[I_JB]
     # diagnostics: totals, the deepest primary, the primaries' mean slip and sums
     diag[D_FN] = fn_tot
     diag[D_NTOUCH] = ntouch
@@ -493,7 +513,7 @@ def elastic_energy(x, CP, E, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw
     total = 0.0
     nexp = CP[I_NEXP]
     for e in range(E):
-        s, Re, dRe = _edge_frame(E, e, x[IZ], CP)
+        s, Re, dRe, _ = _edge_frame(E, e, x[IZ], CP)
         ixi = IXI if e == 0 else IXI2
         e_el = 0.5 * s * CP[I_KT] * x[ixi] * x[ixi]
         for j in range(ncand[e]):
@@ -534,7 +554,7 @@ def search_contacts(x, CP, E, cand, ncand, cslack, cbase, rho0, orders, ccos, cs
     e0 = abs(CP[I_EL])
     dist = np.empty(NCMAX)
     for e in range(E):
-        _, Re, _ = _edge_frame(E, e, x[IZ], CP)
+        _, Re, _, _ = _edge_frame(E, e, x[IZ], CP)
         n, pb = local_minima(cxf, cyf, cbase[e], Re + e0 + CP[I_MARGIN], hmax[e], aspc[e],
                              CP[I_MAXSTEP], rho0, orders, ccos, csin, bphi, bh, bw, tphi[e],
                              th[e], tw[e], span[e], cand[e], dist)
@@ -557,7 +577,7 @@ def resolve_contacts(x, CP, E, cand, ncand, cslack, travel, rho0, orders, ccos, 
     e0 = abs(CP[I_EL])
     ms = CP[I_MAXSTEP]
     for e in range(E):
-        _, Re, _ = _edge_frame(E, e, x[IZ], CP)
+        _, Re, _, _ = _edge_frame(E, e, x[IZ], CP)
         for j in range(ncand[e]):
             if j > 0 and travel >= 0.0 and cslack[e, j] > 4.0 * travel + RESOLVE_GAP:
                 continue
@@ -713,7 +733,7 @@ def _stick_projection(x, CP, E, diag):  # noqa: ANN001, ANN202
         xi = x[ixi]
         if xi == 0.0:  # nothing to project (exactly: the rule keeps a zero spring)
             continue
-        s, Re, _ = _edge_frame(E, e, x[IZ], CP)
+        s, Re, _, _ = _edge_frame(E, e, x[IZ], CP)
         ratio = 1.0 if E == 1 else CP[I_R] / Re
         fn0 = diag[D_EFN + e]
         if fn0 <= 0.0:
@@ -1173,7 +1193,8 @@ class ContactModel:
         x = np.asarray(x, float)
         p = self.params
         kin = 0.5 * (p.ball.mass * (x[IVX] ** 2 + x[IVY] ** 2 + x[IVZ] ** 2)
-                     + p.ball.inertia * x[IOM] ** 2 + p.frame.inertia * x[ITHD] ** 2)
+                     + p.ball.inertia * (x[IOM] ** 2 + x[IWPX] ** 2 + x[IWPY] ** 2)
+                     + p.frame.inertia * x[ITHD] ** 2)
         pot = p.ball.mass * self.CP[I_G] * x[IY]
         return kin, pot, self.diagnostics(x)["elastic_energy"]
 

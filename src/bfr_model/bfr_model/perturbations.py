@@ -52,12 +52,14 @@ import yaml
 from numpy.typing import NDArray
 
 from bfr_model.geometry import OffsetCurve, contour_kernel
+from bfr_model.param_file import check, positive
 from bfr_model.params import ParameterError, RigParams, default_params_path, params_to_ros_yaml
 
 __all__ = [
     "PERTURBATIONS",
     "Perturbation",
     "StudySettings",
+    "TwoEdgeSettings",
     "bump_row",
     "contour_arc_to_phi",
     "hc_stiffness_from_linear",
@@ -126,6 +128,37 @@ class ContactRunSettings:
 
 
 @dataclass(frozen=True)
+class TwoEdgeSettings:
+    """``two_edge:`` group: bumps on both plate edges (seed recommendation 3).
+
+    Rows of ``row_length`` along the contour on both halves of it, centred at
+    ``location`` (None: where the discrete model puts path B). Around the reference row
+    (``spacing``, ``height``): a phase sweep of the back edge's row against the front one
+    (in bump spacings), a spacing sweep and a height sweep, each with the front row alone,
+    in phase (0) and interleaved (0.5).
+    """
+
+    duration: float = 8.0
+    location: float | None = None
+    row_length: float = 0.03
+    width: float = 1.0e-4
+    spacing: float = 1.0e-3
+    height: float = 5.0e-4
+    phases: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75)
+    spacings: tuple[float, ...] = (2.0e-3, 4.0e-3, 8.0e-3)
+    heights: tuple[float, ...] = (1.0e-4, 2.5e-4)
+    time_step: float = 2.0e-5
+
+    def __post_init__(self) -> None:
+        for name in ("duration", "row_length", "width", "spacing", "height", "time_step"):
+            positive(f"two_edge.{name}", getattr(self, name))
+        for v in (*self.spacings, *self.heights):
+            positive("two_edge.spacings/heights", v)
+        for v in self.phases:
+            check(0.0 <= v < 1.0, "two_edge.phases", f"{v} is not within [0, 1)")
+
+
+@dataclass(frozen=True)
 class StudySettings:
     """All settings of the perturbation study (``config/perturbation_study.yaml``)."""
 
@@ -133,6 +166,7 @@ class StudySettings:
     run: RunSettings = field(default_factory=RunSettings)
     bounce: BounceSettings = field(default_factory=BounceSettings)
     contact_run: ContactRunSettings = field(default_factory=ContactRunSettings)
+    two_edge: TwoEdgeSettings = field(default_factory=TwoEdgeSettings)
 
 
 def default_study_path() -> Path:

@@ -48,6 +48,7 @@ from bfr_tools.analysis.bounce import (
     plot_bounce,
     taylor_error,
 )
+from bfr_tools.analysis.edges import plot_edges, two_edge_study
 from bfr_tools.analysis.energy import closed_loop_check, energy_analysis, plot_energy
 from bfr_tools.analysis.recorded import analyze_recording, plot_recorded
 from bfr_tools.analysis.trajectory import closed_loop_rigid, progress
@@ -102,7 +103,9 @@ def build_parser() -> argparse.ArgumentParser:
         description="The seed thesis' perturbation study (Knol 2016), rebuilt: energy and "
                     "energy fluctuation of each perturbation (energy), bounces, loss of "
                     "contact and slip over bumps with the discrete and the contact model "
-                    "(bounce), seeded rough tracks (rough).")
+                    "(bounce), bumps on both plate edges (edges), seeded rough tracks "
+                    "(rough); with recordings, the motor's energy on real data (energy "
+                    "RECORDING...).")
     sub = p.add_subparsers(dest="cmd", required=True)
     e = sub.add_parser("energy", help="seed chapter 2: energies, fluctuations, rankings; with "
                                       "recordings: recommendation 2 on real data")
@@ -124,6 +127,11 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--no-contact", action="store_true",
                    help="skip the contact-model runs (the discrete model only)")
     b.add_argument("--contact-duration", type=float, help="contact runs' length [s]")
+    g = sub.add_parser("edges", help="seed recommendation 3: bumps on both plate edges, when "
+                                     "they cancel and when they add (two-edge contact model)")
+    _common(g)
+    g.add_argument("--quick", action="store_true",
+                   help="the phase sweep only (in phase, interleaved, front only), 3 s runs")
     r = sub.add_parser("rough", help="draw a seeded rough surface into a parameter file")
     r.add_argument("--params", type=Path, help="base parameter YAML (default: rig.yaml)")
     r.add_argument("--count", type=int, required=True, help="number of asperities")
@@ -488,6 +496,72 @@ def _bounce_table(out: dict) -> str:
     return "\n".join(lines)
 
 
+# -- edges --------------------------------------------------------------------------------
+
+
+def _edges(args: argparse.Namespace) -> int:
+
+    params, study = _setup(args)
+    cfg = study.two_edge
+    if args.duration:
+        cfg = dataclasses.replace(cfg, duration=args.duration)
+    if args.quick:
+        cfg = dataclasses.replace(cfg, duration=min(cfg.duration, 3.0), phases=(0.0, 0.5),
+                                  spacings=(), heights=())
+        study = dataclasses.replace(study, run=dataclasses.replace(
+            study.run, duration=min(study.run.duration, 4.0), settle=min(study.run.settle,
+                                                                         1.0)))
+    study = dataclasses.replace(study, two_edge=cfg)
+    t0 = time.perf_counter()
+    res = two_edge_study(params, study)
+    res["wall_time"] = time.perf_counter() - t0
+    if not args.no_plots:
+        res["plots"] = [str(p) for p in plot_edges(res, params, study, args.out_dir)]
+    if args.json:
+        print(json.dumps(_clean(res), indent=1))
+        return 0
+    print(_edges_table(res))
+    return 0
+
+
+def _edges_table(res: dict) -> str:
+    """The text report of ``bfr analyze edges``."""
+    c = res["settings"]
+    lines = [
+        "Bumps on both plate edges (seed recommendation 3), two-edge contact model in closed "
+        f"loop, {c['duration']:g} s per run; rows of {1e3 * c['row_length']:g} mm centred at "
+        f"phi = {res['location']:.3g} rad and + pi ({res['location_from']}); bumps sigma "
+        f"{1e3 * c['width']:g} mm; phase = the back edge's row shifted by that fraction of "
+        "the spacing (front only: no back row)",
+        "",
+        f"  {'case':38s} {'slip/turn':>9s} {'turns':>5s} {'airborne':>8s} {'max|z|':>7s} "
+        f"{'lift':>6s} {'ripple':>7s} {'v_c':>5s}  rolling",
+        f"  {'':38s} {'[rad]':>9s} {'':>5s} {'':>8s} {'[mm]':>7s} {'[um]':>6s} "
+        f"{'[um]':>7s} {'[m/s]':>5s}",
+    ]
+    for r in res["runs"]:
+        k = r["kinematic"]
+        state = "yes" if r["ball_kept_rolling"] else f"lost at {r['rolling_until']:.2f} s"
+        kin = (f"{1e6 * k['mean_lift']:6.0f} {1e6 * k['ripple']:7.1f} "
+               f"{_fmt(k['critical_speed']):>5s}")
+        if "slip_per_turn" not in r:
+            lines.append(f"  {r['name']:38s} {'':>9s} {'':>5s} {'':>8s} {'':>7s} {kin}  "
+                         f"{state}")
+            continue
+        lines.append(
+            f"  {r['name']:38s} {r['excess_slip_per_turn']:+9.3f} {r['turns']:5.1f} "
+            f"{r['airborne_fraction']:8.2f} {1e3 * r['max_abs_z']:7.3f} {kin}  {state}")
+    lines += ["", "  slip/turn: int v_slip / R dt per frame turn after the start-up, less the "
+                  "baseline's; turns: how many it rests on (two row passages each)",
+              "  lift, ripple, v_c: rigid edges, quasi-static: the centre at (H_front + "
+              "H_back) / 2 over the row (module bfr_tools.analysis.edges); v_c the speed "
+              "above which the ball leaves the track over the row (flat track)",
+              f"  wall time {res['wall_time']:.0f} s"]
+    if "plots" in res:
+        lines += ["", "Plots: " + ", ".join(res["plots"])]
+    return "\n".join(lines)
+
+
 # -- rough --------------------------------------------------------------------------------
 
 
@@ -509,7 +583,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``bfr analyze``; returns the process exit code."""
     args = build_parser().parse_args(argv)
     try:
-        return {"energy": _energy, "bounce": _bounce, "rough": _rough}[args.cmd](args)
+        return {"energy": _energy, "bounce": _bounce, "edges": _edges,
+                "rough": _rough}[args.cmd](args)
     except (ParameterError, ValueError, OSError) as exc:
         print(f"bfr analyze: error: {exc}", file=sys.stderr)
         return 2
