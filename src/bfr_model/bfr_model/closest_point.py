@@ -64,6 +64,7 @@ __all__ = [
     "contour_point_terms",
     "local_minima",
     "newton_closest",
+    "newton_inline",
     "rho012",
     "seed_eq_4_36",
     "taylor_closest_point",
@@ -251,6 +252,14 @@ def contour_point_terms(phi, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, t
 @njit
 def newton_closest(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin, bphi, bh,  # noqa: ANN001, ANN201
                    bw, tphi, th, tw, span):  # noqa: ANN001
+    """Local minimiser of ``|delta(phi) - c|`` near phi0 (:func:`newton_inline`, compiled)."""
+    return newton_inline(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin, bphi,
+                         bh, bw, tphi, th, tw, span)
+
+
+@njit_inline
+def newton_inline(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin, bphi, bh,  # noqa: ANN001, ANN201
+                  bw, tphi, th, tw, span):  # noqa: ANN001
     """Local minimiser of ``|delta(phi) - c|`` near phi0 by Newton's method (module doc).
 
     Parameters

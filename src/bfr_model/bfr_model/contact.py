@@ -146,6 +146,7 @@ from bfr_model.closest_point import (
     contour_point_terms,
     local_minima,
     newton_closest,
+    newton_inline,
 )
 from bfr_model.dynamics import RigidModel, curve_terms, rigid_terms
 from bfr_model.geometry import OffsetCurve
@@ -564,7 +565,7 @@ def search_contacts(x, CP, E, cand, ncand, cslack, cbase, rho0, orders, ccos, cs
             cslack[e, j] = dist[j] - Re - e0
 
 
-@njit
+@njit_inline
 def resolve_contacts(x, CP, E, cand, ncand, cslack, travel, rho0, orders, ccos, csin, bphi,  # noqa: ANN001, ANN201
                      bh, bw, tphi, th, tw, span):  # noqa: ANN001
     """Re-solve the candidates that may be needed (warm-started Newton).
@@ -581,9 +582,9 @@ def resolve_contacts(x, CP, E, cand, ncand, cslack, travel, rho0, orders, ccos, 
         for j in range(ncand[e]):
             if j > 0 and travel >= 0.0 and cslack[e, j] > 4.0 * travel + RESOLVE_GAP:
                 continue
-            phi, d, f, fp, _ = newton_closest(cxf, cyf, cand[e, j], 8, 1e-14, ms, rho0, orders,
-                                              ccos, csin, bphi, bh, bw, tphi[e], th[e],
-                                              tw[e], span[e])
+            phi, d, f, fp, _ = newton_inline(cxf, cyf, cand[e, j], 8, 1e-14, ms, rho0, orders,
+                                             ccos, csin, bphi, bh, bw, tphi[e], th[e], tw[e],
+                                             span[e])
             if not (fp > 0.0 and abs(f / fp) < 1e-12):
                 return False
             cand[e, j] = phi
