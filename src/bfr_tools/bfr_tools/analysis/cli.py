@@ -85,6 +85,12 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
+def _emit(args: argparse.Namespace, doc: dict, table: Any) -> int:
+    """Print ``doc`` as one JSON document (``--json``) or as ``table(doc)``; exit code 0."""
+    print(json.dumps(_clean(doc), indent=1) if args.json else table(doc))
+    return 0
+
+
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", type=Path, help="rig parameter YAML (default: rig.yaml)")
     p.add_argument("--study", type=Path,
@@ -184,11 +190,7 @@ def _energy(args: argparse.Namespace) -> int:
         fig["closed_loop_check"] = closed_loop_check(params, study, traj)
     if not args.no_plots:
         fig["plots"] = [str(p) for p in plot_energy(rep, args.out_dir)]
-    if args.json:
-        print(json.dumps(_clean(fig), indent=1))
-        return 0
-    print(_energy_table(fig))
-    return 0
+    return _emit(args, fig, _energy_table)
 
 
 def _energy_table(fig: dict) -> str:
@@ -314,11 +316,8 @@ def _energy_recorded(args: argparse.Namespace, params: Any, study: Any) -> int:
             res.figures["plots"] = [str(p) for p in
                                     plot_recorded(res, args.out_dir, rec_path.stem)]
         results.append(res.figures)
-    if args.json:
-        print(json.dumps(_clean({"recordings": results}), indent=1))
-        return 0
-    print("\n\n".join(_recorded_table(f) for f in results))
-    return 0
+    return _emit(args, {"recordings": results},
+                 lambda d: "\n\n".join(_recorded_table(f) for f in d["recordings"]))
 
 
 def _recorded_table(f: dict) -> str:
@@ -362,8 +361,8 @@ def _recorded_table(f: dict) -> str:
               f"  {'term':8s} {f'per {basis} [J]':>14s} {'p-p [J]':>10s}  verdict"]
     for sym, r in pt["terms"].items():
         s = r["seed"]
-        lines.append(f"  {sym:8s} {_fmt(s['rate']):>14s} {_fmt(s['amplitude']):>10s}  "
-                     f"{r['verdict']}")
+        rate, amp = ((_fmt(s["rate"]), _fmt(s["amplitude"])) if r["applies"] else ("-", "-"))
+        lines.append(f"  {sym:8s} {rate:>14s} {amp:>10s}  {r['verdict']}")
     if "plots" in f:
         lines.append(" Plots: " + ", ".join(f["plots"]))
     return "\n".join(lines)
@@ -399,11 +398,7 @@ def _bounce(args: argparse.Namespace) -> int:
         out["contact_wall_time"] = time.perf_counter() - t0
     if not args.no_plots:
         out["plots"] = [str(p) for p in plot_bounce(rep, traj, args.out_dir, tay, rows)]
-    if args.json:
-        print(json.dumps(_clean(out), indent=1))
-        return 0
-    print(_bounce_table(out))
-    return 0
+    return _emit(args, out, _bounce_table)
 
 
 def _bounce_table(out: dict) -> str:
@@ -517,11 +512,7 @@ def _edges(args: argparse.Namespace) -> int:
     res["wall_time"] = time.perf_counter() - t0
     if not args.no_plots:
         res["plots"] = [str(p) for p in plot_edges(res, params, study, args.out_dir)]
-    if args.json:
-        print(json.dumps(_clean(res), indent=1))
-        return 0
-    print(_edges_table(res))
-    return 0
+    return _emit(args, res, _edges_table)
 
 
 def _edges_table(res: dict) -> str:
