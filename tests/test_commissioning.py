@@ -112,31 +112,27 @@ def test_commissioning_loop_on_a_rig_with_every_effect(ros_harness: rosutil.RosH
     nominal = load_ros_parameters(REPO / "src" / "bfr_model" / "config" / "rig.yaml")
     corrected = load_ros_parameters(c2)
     assert corrected != nominal  # the diagnosis found what the nominal model leaves out
-    # 4. the controller and camera on the corrected parameters, the ball on their orbit (a
-    #    run whose encoder reached the controller late, DDS discovery leaving the ball alone,
-    #    is repeated: see test_standin_integration)
+    # 4. the controller and camera on the corrected parameters, the ball on their orbit,
+    #    released once the stand-in's topics have peers (start.wait: see
+    #    test_standin_integration)
     watch = Watch(h)
-    duration = 3.0  # at a tenth of real time
-    for attempt in range(3):
-        cam = node_processes.start("bfr_camera", "camera_node",
-                                   ros_args=[*camera_args(cam_yaml), "--params-file", str(c2)])
-        ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
-            "-p", "use_sim_time:=true", "--params-file", str(c2)])
-        h.wait_for_match(watch.state_sub, timeout=90)
-        assert h.spin_until(lambda c=ctl: "mode WAITING (no ball yet)" in c.output(), timeout=90)
-        watch.states.clear()
-        truth_csv = tmp_path / f"truth{attempt}.csv"
-        rig = node_processes.start_python(str(STANDIN), args=standin_args({
-            "time_scale": 0.1, "duration": duration, "seed": 7, "truth_out": str(truth_csv),
-            **EFFECTS, **orbit_start_standin(0.3, c2)}))
-        assert wait_exit(rig, h, duration / 0.1 + 120) == 0, rig.output()[-3000:]
-        first = [float(x) for x in re.findall(r"ROLLING at t = ([0-9.]+) s", ctl.output())]
-        if first and first[0] <= 0.15:
-            break
-        print(f"first fix at {first[0] if first else '?'} s of simulated time (discovery); "
-              f"again")
-        cam.stop()
-        ctl.stop()
+    duration = 3.0  # at a fifth of real time
+    cam = node_processes.start("bfr_camera", "camera_node",
+                               ros_args=[*camera_args(cam_yaml), "--params-file", str(c2)])
+    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
+        "-p", "use_sim_time:=true", "--params-file", str(c2)])
+    h.wait_for_match(watch.state_sub, timeout=90)
+    assert h.spin_until(lambda c=ctl: "mode WAITING (no ball yet)" in c.output(), timeout=90)
+    watch.states.clear()
+    truth_csv = tmp_path / "truth.csv"
+    rig = node_processes.start_python(str(STANDIN), args=standin_args({
+        "time_scale": 0.2, "duration": duration, "seed": 7, "truth_out": str(truth_csv),
+        "start.wait": 60.0, "start.joint_states_peers": 2, **EFFECTS,
+        **orbit_start_standin(0.3, c2)}))
+    assert wait_exit(rig, h, duration / 0.2 + 120) == 0, rig.output()[-3000:]
+    assert "start: peers matched" in rig.output(), rig.output()[-3000:]
+    first = [float(x) for x in re.findall(r"ROLLING at t = ([0-9.]+) s", ctl.output())]
+    assert first and first[0] <= 0.15, ctl.output()[-3000:]
     with truth_csv.open() as f:
         rows = list(csv.DictReader(f))
     t = np.array([float(r["t"]) for r in rows])

@@ -25,6 +25,11 @@ Topics (relative names; README "Topic contract" of bfr):
   clamped to +-``actuator.torque_limit``, held (zero-order hold), zero after
   ``command.timeout`` of simulated time without one.
 
+Start: at once (a rig's drive and camera do not wait for anyone), or, with ``start.wait`` > 0,
+once the image and effort topics each have a peer and joint_states ``start.joint_states_peers``
+(as an operator holds the ball until the camera and the controller are up), waiting at most
+``start.wait`` wall seconds.
+
 Stops after ``duration`` [s simulated] (0: never) or on SIGINT/SIGTERM, writing
 ``truth_out`` (CSV: t, theta, theta_dot, ball_x, ball_y, ball_angle, ball_angle_dot,
 in_contact) either way. Bad parameters: one line on stderr, exit code 2.
@@ -102,6 +107,10 @@ class StandInConfig:
         Output paths ('' for none).
     status_period : float
         Wall time between status lines on stderr [s].
+    start_wait : float
+        Longest wall time to wait for the peers before starting [s]; 0 starts at once.
+    start_js_peers : int
+        Subscriptions of joint_states to wait for (the camera and the controller: 2).
     """
 
     rig: physics.RigParams
@@ -127,6 +136,8 @@ class StandInConfig:
     camera_params_out: str = ""
     truth_out: str = ""
     status_period: float = 5.0
+    start_wait: float = 0.0
+    start_js_peers: int = 1
     bumps: tuple[physics.Bump, ...] = field(default=())
 
     def __post_init__(self) -> None:
@@ -138,7 +149,9 @@ class StandInConfig:
                   ("actuator.torque_limit", self.torque_limit > 0.0),
                   ("command.timeout", self.command_timeout > 0.0),
                   ("physics.dt", 1e-5 <= self.physics_dt <= 2e-3),
-                  ("status_period", self.status_period > 0.0))
+                  ("status_period", self.status_period > 0.0),
+                  ("start.wait", 0.0 <= self.start_wait <= 600.0),
+                  ("start.joint_states_peers", 1 <= self.start_js_peers <= 100))
         for name, ok in checks:
             if not ok:
                 raise ConfigError(f"parameter {name} out of range: {getattr(self, _FIELD[name])}")
@@ -148,7 +161,8 @@ _FIELD = {"time_scale": "time_scale", "duration": "duration", "joint_states.rate
           "camera.frame_rate": "frame_rate", "effects.camera_latency": "camera_latency",
           "camera.noise": "camera_noise", "actuator.torque_limit": "torque_limit",
           "command.timeout": "command_timeout", "physics.dt": "physics_dt",
-          "status_period": "status_period"}
+          "status_period": "status_period", "start.wait": "start_wait",
+          "start.joint_states_peers": "start_js_peers"}
 
 #: Declared parameters: name -> default (the type of the default is the expected type).
 PARAMETERS: dict[str, Any] = {
@@ -171,7 +185,8 @@ PARAMETERS: dict[str, Any] = {
     "camera.position": list(render.CameraModel().position),
     "camera.look_at": list(render.CameraModel().look_at), "camera.roll": render.CameraModel().roll,
     "actuator.torque_limit": 0.1, "command.timeout": 0.05, "physics.dt": 1e-3,
-    "camera_params_out": "", "truth_out": "", "status_period": 5.0,
+    "camera_params_out": "", "truth_out": "", "status_period": 5.0, "start.wait": 0.0,
+    "start.joint_states_peers": 1,
 }
 
 
@@ -268,7 +283,8 @@ def config_from_values(values: dict[str, Any]) -> StandInConfig:
         camera_occlusion=v["camera.occlusion"],
         torque_limit=v["actuator.torque_limit"], command_timeout=v["command.timeout"],
         physics_dt=v["physics.dt"], camera_params_out=v["camera_params_out"],
-        truth_out=v["truth_out"], status_period=v["status_period"], bumps=bumps)
+        truth_out=v["truth_out"], status_period=v["status_period"],
+        start_wait=v["start.wait"], start_js_peers=v["start.joint_states_peers"], bumps=bumps)
 
 
 def camera_parameter_yaml(camera: render.CameraModel, frame_rate: float) -> str:
@@ -476,6 +492,36 @@ class StandIn:
         due = self.frames[0][0] if self.frames else next_js
         return min(next_js, next_cam, max(due, self.t_ns + 1))
 
+    def wait_for_peers(self) -> None:
+        """Hold the start until every topic has a peer, at most ``start_wait`` wall seconds.
+
+        Peers are counted from the ROS graph (a subscription of the image,
+        ``start_js_peers`` of joint_states, a publisher of the effort commands); the start
+        follows 0.5 s after the last one appeared, so that the peers' side of discovery has
+        completed too.
+        """
+        deadline = time.monotonic() + self.cfg.start_wait
+        waited = time.monotonic()
+
+        def missing() -> list[str]:
+            out = []
+            if self.pub_img.get_subscription_count() < 1:
+                out.append("a subscription of camera/image_raw")
+            if (n := self.pub_js.get_subscription_count()) < self.cfg.start_js_peers:
+                out.append(f"{self.cfg.start_js_peers - n} more subscription(s) of joint_states")
+            if self.sub_cmd.get_publisher_count() < 1:
+                out.append("a publisher of effort_controller/commands")
+            return out
+
+        while (left := missing()) and time.monotonic() < deadline and not self.stop.is_set():
+            self.stop.wait(0.02)
+        if left:
+            _log(f"start: waited {time.monotonic() - waited:.1f} s, starting without "
+                 + ", ".join(left))
+        else:
+            self.stop.wait(0.5)
+            _log(f"start: peers matched after {time.monotonic() - waited:.1f} s")
+
     def run(self) -> None:
         """Advance simulated time at ``time_scale`` of the wall clock until stopped."""
         cfg = self.cfg
@@ -621,6 +667,8 @@ def main(argv: list[str] | None = None) -> int:
                                    daemon=True)
         watcher.start()
         try:
+            if config.start_wait > 0.0:
+                standin.wait_for_peers()
             standin.run()
         finally:
             standin.stop.set()
