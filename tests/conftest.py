@@ -7,9 +7,13 @@ from __future__ import annotations
 
 import re
 from collections.abc import Iterator
+from typing import TYPE_CHECKING
 
 import pytest
 import rosutil
+
+if TYPE_CHECKING:
+    from bfr_control.controller import OrbitalController
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -69,3 +73,25 @@ def node_processes(tmp_path_factory: pytest.TempPathFactory) -> Iterator[NodePro
         yield procs
     finally:
         procs.stop_all()
+
+
+@pytest.fixture(scope="module")
+def controller(tmp_path_factory: pytest.TempPathFactory) -> OrbitalController:
+    """The controller core with the shipped configuration, its gains solved into a temporary
+    cache (one per test module)."""
+    from bfr_control.constraint import VirtualConstraint  # noqa: PLC0415 - only when used
+    from bfr_control.controller import (  # noqa: PLC0415
+        OrbitalController,
+        load_controller_config,
+    )
+    from bfr_control.orbit import PeriodicOrbit  # noqa: PLC0415
+    from bfr_control.riccati import compute_gains  # noqa: PLC0415
+    from bfr_model.dynamics import RigidModel  # noqa: PLC0415
+    from bfr_model.params import load_params  # noqa: PLC0415
+
+    params = load_params()
+    config = load_controller_config()
+    model = RigidModel(params)
+    orbit = PeriodicOrbit(model, VirtualConstraint(model, config.constraint), config.orbit)
+    gains = compute_gains(orbit, config.riccati, directory=tmp_path_factory.mktemp("gains"))
+    return OrbitalController(params, config, gains=gains)

@@ -336,6 +336,20 @@ class RosHarness:
                 f"within {timeout} s (ROS_DOMAIN_ID={os.environ.get('ROS_DOMAIN_ID')})"
             )
 
+    def wait_exit(self, proc: NodeProcess, timeout: float) -> int:
+        """Spin until ``proc`` exits (its own ``duration`` ran out); its exit status.
+
+        Raises
+        ------
+        AssertionError
+            If it is still running after ``timeout`` [s], with the end of its output.
+        """
+        deadline = time.monotonic() + timeout
+        while proc.alive and time.monotonic() < deadline:
+            self.spin_for(0.1)
+        assert not proc.alive, f"still running after {timeout} s:\n{proc.output()[-3000:]}"
+        return proc.process.returncode
+
     def close(self) -> None:
         """Destroy the node and shut the context down."""
         import rclpy  # noqa: PLC0415
@@ -344,6 +358,12 @@ class RosHarness:
         self.node.destroy_node()
         if self.context.ok():
             rclpy.shutdown(context=self.context)
+
+
+def stamp_ns(msg: Any) -> int:
+    """A message's header stamp [ns]."""
+    s = msg.header.stamp
+    return s.sec * 1_000_000_000 + s.nanosec
 
 
 def message_class(type_name: str) -> type:

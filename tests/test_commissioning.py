@@ -40,7 +40,6 @@ from test_standin_integration import (
     camera_file,
     orbit_start_standin,
     standin_args,
-    wait_exit,
 )
 
 pytestmark = pytest.mark.slow
@@ -73,7 +72,7 @@ def record(node_processes, h: rosutil.RosHarness, bag: Path, rig_args: dict,  # 
             msg.data = [float(torque_steps[k])]
             pub.publish(msg)
             h.spin_for(0.02)
-    assert wait_exit(rig, h, 300) == 0, rig.output()[-2000:]
+    assert h.wait_exit(rig, 300) == 0, rig.output()[-2000:]
     for proc in (cam, rec):
         assert proc.stop() == 0
     assert (bag / "metadata.yaml").exists(), rec.output()[-2000:]
@@ -129,7 +128,7 @@ def test_commissioning_loop_on_a_rig_with_every_effect(ros_harness: rosutil.RosH
         "time_scale": 0.2, "duration": duration, "seed": 7, "truth_out": str(truth_csv),
         "start.wait": 60.0, "start.joint_states_peers": 2, **EFFECTS,
         **orbit_start_standin(0.3, c2)}))
-    assert wait_exit(rig, h, duration / 0.2 + 120) == 0, rig.output()[-3000:]
+    assert h.wait_exit(rig, duration / 0.2 + 120) == 0, rig.output()[-3000:]
     assert "start: peers matched" in rig.output(), rig.output()[-3000:]
     first = [float(x) for x in re.findall(r"ROLLING at t = ([0-9.]+) s", ctl.output())]
     assert first and first[0] <= 0.15, ctl.output()[-3000:]

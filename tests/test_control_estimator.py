@@ -12,30 +12,17 @@ import math
 
 import numpy as np
 import pytest
-from bfr_control.constraint import VirtualConstraint
 from bfr_control.controller import (
     BALL_LOST,
     ROLLING,
     OrbitalController,
-    load_controller_config,
 )
 from bfr_control.estimator import BallEstimator, BallObservation, passive_phi_ddot
-from bfr_control.orbit import PeriodicOrbit
-from bfr_control.riccati import compute_gains
 from bfr_model.dynamics import RigidModel
 from bfr_model.params import load_params
 from bfr_sim.closed_loop import SensorConfig, orbit_initial_state, run_closed_loop
 
 NOMINAL = load_params()
-
-
-@pytest.fixture(scope="module")
-def controller(tmp_path_factory: pytest.TempPathFactory) -> OrbitalController:
-    config = load_controller_config()
-    model = RigidModel(NOMINAL)
-    orbit = PeriodicOrbit(model, VirtualConstraint(model, config.constraint), config.orbit)
-    gains = compute_gains(orbit, config.riccati, directory=tmp_path_factory.mktemp("gains"))
-    return OrbitalController(NOMINAL, config, gains=gains)
 
 
 @pytest.fixture

@@ -11,11 +11,7 @@ through. A control test shows that the actuation delay matters: without the pred
 from __future__ import annotations
 
 import pytest
-from bfr_control.constraint import VirtualConstraint
-from bfr_control.controller import OrbitalController, load_controller_config
-from bfr_control.orbit import PeriodicOrbit
-from bfr_control.riccati import compute_gains
-from bfr_model.dynamics import RigidModel
+from bfr_control.controller import OrbitalController
 from bfr_model.params import load_params
 from bfr_sim.closed_loop import SensorConfig, orbit_initial_state, run_closed_loop
 from bfr_tools.control_eval import scale_rolling_radius
@@ -31,15 +27,6 @@ EFFECTS = {
     "rolling radius 1 mm smaller": (None, {}),
     "contour 5 mm larger": ({"frame.contour.a": NOMINAL.frame.contour.a + 5.0e-3}, {}),
 }
-
-
-@pytest.fixture(scope="module")
-def controller(tmp_path_factory: pytest.TempPathFactory) -> OrbitalController:
-    config = load_controller_config()
-    model = RigidModel(NOMINAL)
-    orbit = PeriodicOrbit(model, VirtualConstraint(model, config.constraint), config.orbit)
-    gains = compute_gains(orbit, config.riccati, directory=tmp_path_factory.mktemp("gains"))
-    return OrbitalController(NOMINAL, config, gains=gains)
 
 
 @pytest.mark.parametrize("effect", list(EFFECTS))

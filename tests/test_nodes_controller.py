@@ -30,11 +30,6 @@ WAITING, ROLLING, BALL_LOST, FAULT = (ControllerState.WAITING, ControllerState.R
                                       ControllerState.BALL_LOST, ControllerState.FAULT)
 
 
-def stamp_ns(m: object) -> int:
-    s = m.header.stamp  # type: ignore[attr-defined]
-    return s.sec * NS + s.nanosec
-
-
 class Rig:
     """Plant, encoder and camera of the test, in lock-step with the controller node."""
 
@@ -100,7 +95,7 @@ class Rig:
         self.obs_pub.publish(m)
 
     def answered(self) -> bool:
-        return bool(self.states) and stamp_ns(self.states[-1]) >= self.t_ns and \
+        return bool(self.states) and rosutil.stamp_ns(self.states[-1]) >= self.t_ns and \
             bool(self.cmds) and self.cmds[-1] == self.states[-1].torque
 
     def frame(self, proc: rosutil.NodeProcess, valid: bool = True, steps: int = 5) -> None:
@@ -116,7 +111,7 @@ class Rig:
         self.u = self.cmds[-1]
 
     def modes_since(self, t_ns: int) -> list[int]:
-        return [s.mode for s in self.states if stamp_ns(s) > t_ns]
+        return [s.mode for s in self.states if rosutil.stamp_ns(s) > t_ns]
 
 
 def test_controller_node_keeps_the_ball_rolling_and_stops_safely(
@@ -142,7 +137,7 @@ def test_controller_node_keeps_the_ball_rolling_and_stops_safely(
     assert 2.2 < mean_pd < 2.6
     assert rig.states[-1].mode == ROLLING and "ROLLING at t = " in ctl.output()
     assert max(abs(c) for c in rig.cmds) <= 0.1 + 1e-12
-    tail = [s for s in rig.states if stamp_ns(s) > 2 * NS]
+    tail = [s for s in rig.states if rosutil.stamp_ns(s) > 2 * NS]
     assert np.sqrt(np.mean([s.y ** 2 for s in tail])) < 0.02  # on the constraint
     assert all(0.0 <= s.ball_age < 0.006 for s in tail)
     s = rig.states[-1]

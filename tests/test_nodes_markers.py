@@ -31,10 +31,6 @@ from visualization_msgs.msg import ImageMarker, Marker, MarkerArray
 STANDIN = Path(__file__).resolve().parent / "independent" / "standin_node.py"
 
 
-def stamp(m) -> int:  # noqa: ANN001
-    return m.header.stamp.sec * NS + m.header.stamp.nanosec
-
-
 def test_camera_node_markers(ros_harness: rosutil.RosHarness, node_processes) -> None:  # noqa: ANN001
     h = ros_harness
     rig = CameraRig(h)
@@ -69,23 +65,23 @@ def test_camera_node_markers(ros_harness: rosutil.RosHarness, node_processes) ->
         rig.image(t, img)
         rig.wait_obs(t, cam)
     h.spin_until(lambda: len(arrays) >= 9 and len(circles) >= 9, timeout=10.0)
-    arrays[:] = [a for a in arrays if stamp(a.markers[0]) >= t0]  # not the warm-up's
-    circles[:] = [c for c in circles if stamp(c) >= t0]
+    arrays[:] = [a for a in arrays if rosutil.stamp_ns(a.markers[0]) >= t0]  # not the warm-up's
+    circles[:] = [c for c in circles if rosutil.stamp_ns(c) >= t0]
     assert 9 <= len(arrays) <= 10 and len(circles) == len(arrays), (len(arrays), len(circles))
-    stamps = sorted(stamp(a.markers[0]) for a in arrays)
+    stamps = sorted(rosutil.stamp_ns(a.markers[0]) for a in arrays)
     assert min(np.diff(stamps)) >= 30_000_000  # 1/30 s of image stamps, on the 5 ms grid
     for a in arrays:
         (m,) = a.markers
         assert (m.header.frame_id, m.ns, m.action, m.type) == \
             ("world", "camera_fix", Marker.ADD, Marker.SPHERE)
-        c = centres[stamp(m)]
+        c = centres[rosutil.stamp_ns(m)]
         assert math.hypot(m.pose.position.x - c[0], m.pose.position.y - c[1]) < 5e-4
         assert m.scale.x == pytest.approx(2 * 16.6e-3)
     for c in circles:  # on the image, where the camera model projects the rendered ball
-        o = rig.obs[stamp(c)]
+        o = rig.obs[rosutil.stamp_ns(c)]
         assert c.header.frame_id == "camera_optical_frame" and c.type == ImageMarker.CIRCLE
         assert (c.position.x, c.position.y, c.scale) == pytest.approx((o.u, o.v, o.radius_px))
-        u, v = rig.cam.project(np.array([centres[stamp(c)]]))[0]
+        u, v = rig.cam.project(np.array([centres[rosutil.stamp_ns(c)]]))[0]
         assert math.hypot(c.position.x - u, c.position.y - v) < 1.5
     # the ball leaves the picture: the fix marker is deleted
     arrays.clear()
@@ -129,7 +125,7 @@ def test_simulator_markers_rate(ros_harness: rosutil.RosHarness, node_processes,
         return
     h.wait_for_match(sub, timeout=30)
     assert h.spin_until(lambda: len(arrays) >= 30, timeout=60), sim.output()[-2000:]
-    t = np.array([stamp(a.markers[0]) for a in arrays])
+    t = np.array([rosutil.stamp_ns(a.markers[0]) for a in arrays])
     period = np.diff(t) / NS
     assert period.min() >= 1 / 30 - 1e-3 and np.median(period) == pytest.approx(1 / 30, abs=1e-3)
     parts = {(m.ns, m.id) for m in arrays[-1].markers}
@@ -169,7 +165,7 @@ def test_camera_markers_on_the_independent_rig(ros_harness: rosutil.RosHarness, 
     tx, ty = (np.array([float(r[k]) for r in rows]) for k in ("ball_x", "ball_y"))
     fixes = [a.markers[0] for a in arrays if a.markers[0].action == Marker.ADD]
     assert len(fixes) >= 0.9 * len(arrays)
-    t = np.array([stamp(m) for m in fixes]) / NS
+    t = np.array([rosutil.stamp_ns(m) for m in fixes]) / NS
     inside = t <= tt[-1]
     x = np.array([m.pose.position.x for m in fixes])[inside]
     y = np.array([m.pose.position.y for m in fixes])[inside]

@@ -23,19 +23,6 @@ from bfr_interfaces.msg import ControllerState, SimTruth
 NS = 1_000_000_000
 
 
-def stamp(msg: object) -> int:
-    s = msg.header.stamp  # type: ignore[attr-defined]
-    return s.sec * NS + s.nanosec
-
-
-def wait_exit(proc: rosutil.NodeProcess, harness: rosutil.RosHarness, timeout: float) -> int:
-    deadline = time.monotonic() + timeout
-    while proc.alive and time.monotonic() < deadline:
-        harness.spin_for(0.1)
-    assert not proc.alive, f"node still running after {timeout} s:\n{proc.output()[-3000:]}"
-    return proc.process.returncode
-
-
 class Controller:
     """Answers each camera frame like the controller node: a command, then a state."""
 
@@ -65,7 +52,7 @@ class Controller:
     def _on_image(self, msg: Image) -> None:
         self.images.append(msg)
         if self.answering:
-            self.answer(stamp(msg), self.torque)
+            self.answer(rosutil.stamp_ns(msg), self.torque)
 
     def answer(self, t_ns: int, torque: float) -> None:
         c = Float64MultiArray()
@@ -89,42 +76,42 @@ def test_simulator_lockstep_contract(ros_harness: rosutil.RosHarness, node_proce
     h.wait_for_match(ctl.subs[0], timeout=60)
     h.wait_for_match(ctl.state, timeout=30)
     # answer every frame up to t = 0.8 s, then a NaN command, then go silent (dead controller)
-    assert h.spin_until(lambda: ctl.images and stamp(ctl.images[-1]) >= 800_000_000,
+    assert h.spin_until(lambda: ctl.images and rosutil.stamp_ns(ctl.images[-1]) >= 800_000_000,
                         timeout=120), sim.output()[-3000:]
     ctl.answering = False
-    t_nan = stamp(ctl.images[-1])
+    t_nan = rosutil.stamp_ns(ctl.images[-1])
     bad = Float64MultiArray()
     bad.data = [math.nan]
     ctl.cmd.publish(bad)
     ctl.answer(t_nan, 0.5)  # the state says 0.5 was sent, so the frame counts as answered
-    assert wait_exit(sim, h, 120) == 0
+    assert h.wait_exit(sim, 120) == 0
     h.spin_for(0.5)
     out = sim.output()
     # rates in simulated time; exact in the lock-step part (t <= t_nan), where nothing can be
     # lost, since the simulator waits for this test after every frame
     lock = t_nan
-    js_t = np.array([stamp(m) for m in ctl.js])
+    js_t = np.array([rosutil.stamp_ns(m) for m in ctl.js])
     assert np.all(np.diff(js_t) > 0)
     assert js_t[0] == 0 and max(ctl.clock) == 1_500_000_000
     jl = js_t[js_t <= lock]
     assert np.max(np.diff(jl)) <= 2_000_000  # 500 Hz, plus a sample at each frame
     assert jl.size == lock // 10_000_000 * 6 + 1 + (lock % 10_000_000 > 0) * 3
-    img_t = np.array([stamp(m) for m in ctl.images])
+    img_t = np.array([rosutil.stamp_ns(m) for m in ctl.images])
     il = img_t[img_t <= lock]
     assert il.size == lock // 5_000_000 + 1 and set(np.diff(il)) == {5_000_000}
     assert set(img_t) <= set(js_t) | {t for t in img_t if t > lock}  # encoder sampled at frames
     im = ctl.images[0]
     assert (im.encoding, im.width, im.height, im.step, len(im.data)) == ("mono8", 640, 480,
                                                                           640, 640 * 480)
-    info_t = {stamp(i) for i in ctl.infos}
+    info_t = {rosutil.stamp_ns(i) for i in ctl.infos}
     assert set(il) <= info_t
     assert ctl.infos[0].k[0] == pytest.approx(600.0) and ctl.infos[0].header.frame_id
-    tr_t = np.array([stamp(m) for m in ctl.truth])
+    tr_t = np.array([rosutil.stamp_ns(m) for m in ctl.truth])
     tl = tr_t[tr_t <= lock]
     assert tl.size == lock // 5_000_000 + 1 and set(np.diff(tl)) == {5_000_000}
     assert np.all(np.diff(ctl.clock) >= 0)
     # the actuator: clamped to the -p override, the NaN ignored, then the timeout
-    torque = {stamp(m): m.torque for m in ctl.truth}
+    torque = {rosutil.stamp_ns(m): m.torque for m in ctl.truth}
     assert torque[500_000_000] == pytest.approx(0.05)
     assert "ignoring effort command: effort command is not finite" in out
     held = [q for t, q in torque.items() if lock < t <= lock + 90_000_000]
@@ -133,7 +120,7 @@ def test_simulator_lockstep_contract(ros_harness: rosutil.RosHarness, node_proce
     assert zero and np.all(np.array(zero) == 0.0)  # ... until command.timeout (0.1 s)
     assert "no effort command for 0.1 s (simulated): applying zero torque" in out
     assert "lock-step: no answer from the controller" in out  # ... and it kept running
-    js_by_t = {stamp(m): m for m in ctl.js}
+    js_by_t = {rosutil.stamp_ns(m): m for m in ctl.js}
     assert js_by_t[500_000_000].effort[0] == pytest.approx(0.05)
     # the simulator never publishes the hardware command topic
     pubs = h.node.get_publishers_info_by_topic("/effort_controller/commands")
@@ -157,10 +144,11 @@ def test_simulator_params_file_remap_and_realtime(ros_harness: rosutil.RosHarnes
     h.wait_for_match(js, timeout=60)
     h.wait_for_match(sub, timeout=30)
     assert h.spin_until(lambda: len(truth) >= 20, timeout=60), sim.output()[-2000:]
-    t0, wall0 = stamp(truth[-1]), time.monotonic()
-    assert wait_exit(sim, h, 60) == 0
-    t1, wall1 = stamp(truth[-1]), time.monotonic()
-    assert set(np.diff([stamp(m) for m in truth])) == {10_000_000}  # 100 Hz from the file
+    t0, wall0 = rosutil.stamp_ns(truth[-1]), time.monotonic()
+    assert h.wait_exit(sim, 60) == 0
+    t1, wall1 = rosutil.stamp_ns(truth[-1]), time.monotonic()
+    # 100 Hz from the file
+    assert set(np.diff([rosutil.stamp_ns(m) for m in truth])) == {10_000_000}
     # realtime pacing: never faster than the requested factor (slower is allowed: load)
     assert (t1 - t0) / NS <= 2.0 * (wall1 - wall0) + 0.3
     assert "camera 200 Hz" in sim.output()
@@ -174,5 +162,5 @@ def test_simulator_params_file_remap_and_realtime(ros_harness: rosutil.RosHarnes
 def test_simulator_refuses_bad_parameters(ros_harness: rosutil.RosHarness, node_processes,  # noqa: ANN001
                                           args: list[str], message: str) -> None:
     sim = node_processes.start("bfr_sim", "simulator_node", ros_args=args)
-    assert wait_exit(sim, ros_harness, 60) == 2
+    assert ros_harness.wait_exit(sim, 60) == 2
     assert message in sim.output()

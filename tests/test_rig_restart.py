@@ -21,11 +21,6 @@ NS = 1_000_000_000
 pytestmark = pytest.mark.slow
 
 
-def stamp_ns(m: object) -> int:
-    s = m.header.stamp  # type: ignore[attr-defined]
-    return s.sec * NS + s.nanosec
-
-
 def test_kill_and_restart_the_controller(ros_harness: rosutil.RosHarness,
                                          node_processes) -> None:  # noqa: ANN001
     h = ros_harness
@@ -45,7 +40,7 @@ def test_kill_and_restart_the_controller(ros_harness: rosutil.RosHarness,
     h.wait_for_match(tsub, timeout=60)
 
     def sim_time() -> int:
-        return stamp_ns(truth[-1]) if truth else 0
+        return rosutil.stamp_ns(truth[-1]) if truth else 0
 
     # rolling under control for 3 s of simulated time
     assert h.spin_until(lambda: sim_time() > 3 * NS, timeout=180), sim.output()[-3000:]
@@ -57,7 +52,7 @@ def test_kill_and_restart_the_controller(ros_harness: rosutil.RosHarness,
     # the simulator keeps running, with zero torque after command.timeout
     assert h.spin_until(lambda: sim_time() > t_kill + 2 * NS, timeout=60), sim.output()[-3000:]
     assert sim.alive
-    late = [m for m in truth if stamp_ns(m) > t_kill + 200_000_000]
+    late = [m for m in truth if rosutil.stamp_ns(m) > t_kill + 200_000_000]
     assert late and all(m.torque == 0.0 for m in late)
     out = sim.output()
     assert "lock-step: no answer from the controller" in out

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import csv
 import signal
-import time
 from pathlib import Path
 
 import numpy as np
@@ -83,19 +82,6 @@ def read_truth(path: Path) -> dict[str, np.ndarray]:
     return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
 
 
-def stamp_ns(m: object) -> int:
-    s = m.header.stamp  # type: ignore[attr-defined]
-    return s.sec * NS + s.nanosec
-
-
-def wait_exit(proc: rosutil.NodeProcess, h: rosutil.RosHarness, timeout: float) -> int:
-    deadline = time.monotonic() + timeout
-    while proc.alive and time.monotonic() < deadline:
-        h.spin_for(0.1)
-    assert not proc.alive, f"still running after {timeout} s:\n{proc.output()[-3000:]}"
-    return proc.process.returncode
-
-
 class Watch:
     """The test's own subscriptions: controller states and ball observations."""
 
@@ -133,7 +119,7 @@ def camera_file(node_processes, h: rosutil.RosHarness, tmp: Path) -> Path:  # no
     path = tmp / "standin_camera.yaml"
     proc = node_processes.start_python(str(STANDIN), args=standin_args(
         {"duration": 0.001, "camera_params_out": str(path)}))
-    assert wait_exit(proc, h, 120) == 0, proc.output()[-2000:]
+    assert h.wait_exit(proc, 120) == 0, proc.output()[-2000:]
     text = path.read_text()
     assert "camera.position" in text or "position" in text
     return path
@@ -153,7 +139,7 @@ def test_nodes_keep_the_standins_ball_rolling(ros_harness: rosutil.RosHarness,
     rig = node_processes.start_python(str(STANDIN), args=standin_args({
         "time_scale": scale, "duration": duration, "seed": 5, "truth_out": str(truth_csv),
         "start.wait": 60.0, "start.joint_states_peers": 2, **orbit_start_standin(0.3)}))
-    assert wait_exit(rig, h, 2.0 * duration / scale + 120) == 0, rig.output()[-3000:]
+    assert h.wait_exit(rig, 2.0 * duration / scale + 120) == 0, rig.output()[-3000:]
     assert "start: peers matched" in rig.output(), rig.output()[-3000:]
     h.spin_for(0.5)
     truth = read_truth(truth_csv)
@@ -171,14 +157,14 @@ def test_nodes_keep_the_standins_ball_rolling(ros_harness: rosutil.RosHarness,
     assert 2.0 < pace < 2.8, pace
     # under control to the end: ROLLING from the first fixes on, never lost, never a fault
     modes = np.array([s.mode for s in watch.states])
-    st = np.array([stamp_ns(s) for s in watch.states]) / NS
+    st = np.array([rosutil.stamp_ns(s) for s in watch.states]) / NS
     assert modes[-1] == ROLLING and st[-1] > duration - 0.2, ctl.output()[-3000:]
     first = st[np.argmax(modes == ROLLING)]
     assert first <= 0.15  # picked up as soon as discovery let the fixes through
     assert not np.any(np.isin(modes[st > first], (BALL_LOST, FAULT))), ctl.output()[-3000:]
     assert max(abs(s.torque) for s in watch.states) <= 0.1 + 1e-12
     # the camera on images it did not render, with intrinsics it got from camera_info only
-    ot = np.array([stamp_ns(o) for o in watch.obs]) / NS
+    ot = np.array([rosutil.stamp_ns(o) for o in watch.obs]) / NS
     valid = np.array([o.valid for o in watch.obs])
     assert valid[ot > 0.1].mean() > 0.95
     ox = np.array([o.x for o in watch.obs])[valid]
@@ -203,7 +189,7 @@ def test_camera_killed_and_restarted_mid_run(ros_harness: rosutil.RosHarness,
     cam_yaml = camera_file(node_processes, h, tmp_path)
 
     def sim_t() -> float:
-        return stamp_ns(watch.states[-1]) / NS if watch.states else 0.0
+        return rosutil.stamp_ns(watch.states[-1]) / NS if watch.states else 0.0
 
     cam, ctl = start_nodes(node_processes, h, cam_yaml, watch)
     watch.states.clear()
@@ -220,10 +206,10 @@ def test_camera_killed_and_restarted_mid_run(ros_harness: rosutil.RosHarness,
     n_obs = len(watch.obs)
     lost_timeout = load_controller_config().supervisor.lost_timeout
     assert h.spin_until(lambda: sim_t() > t_kill + 0.6, timeout=60)
-    after = [s for s in watch.states if stamp_ns(s) / NS > t_kill]
+    after = [s for s in watch.states if rosutil.stamp_ns(s) / NS > t_kill]
     modes = [s.mode for s in after]
     assert BALL_LOST in modes, ctl.output()[-2000:]
-    t_lost = next(stamp_ns(s) / NS for s in after if s.mode == BALL_LOST)
+    t_lost = next(rosutil.stamp_ns(s) / NS for s in after if s.mode == BALL_LOST)
     # rode the gap on the model up to its bound, not longer (the kill lands between frames)
     assert lost_timeout - 0.05 <= t_lost - t_kill <= lost_timeout + 0.1
     assert all(s.torque == 0.0 for s in after if s.mode != ROLLING)
