@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from bfr_model.dynamics import RigidModel
+from bfr_model.dynamics import RigidModel, frame_gravity, joint_torque
 from bfr_model.params import RigParams
 from numpy.typing import NDArray
 from scipy.stats import chi2
@@ -296,8 +296,6 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
     traces = []
     n_win = 0
     jf = params.frame.inertia
-    jp = params.joint
-    k_u = params.actuator.torque_gain
     for i0 in range(0, prep.n - nh - 1, step):
         if not ok[i0:i0 + nh + 1].all():
             continue
@@ -321,8 +319,8 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
             xs = np.empty((nh + 1, 4))
             xs[0] = [th, 0.0, v, 0.0]
             for k in range(nh):
-                a = (k_u * prep.u[i0 + k] - jp.viscous_friction * v
-                     - jp.coulomb_friction * np.tanh(v / jp.coulomb_smoothing)) / jf
+                a = (joint_torque(prep.u[i0 + k], v, model.P)
+                     - frame_gravity(np.sin(th), np.cos(th), model.P)) / jf
                 th += dt * v + 0.5 * dt * dt * a
                 v += dt * a
                 xs[k + 1] = [th, 0.0, v, 0.0]

@@ -15,7 +15,7 @@ sides are convolved with one smooth kernel ``k`` (``cos^4``, half-width ``T``, u
 needs only the states and their first derivatives, evaluated pointwise in the exact model
 (including fast terms such as track bumps), and both sides see exactly the same filter.
 It never diverges on the unstable system (no integration), and it is linear in the
-measurement noise to first order. ``Q_theta = k_u u - c_v th' - T_c tanh(th'/v_c)``;
+measurement noise to first order. ``Q_theta = k_u u + tau_0 - c_v th' - T_c tanh(th'/v_c)``;
 ``Q_phi = -mu_rol lam tanh(ph'/v_r) F_n`` with ``F_n = f0 + f_th th''`` (the dynamics
 module's exact normal force; th'' from preprocessing).
 
@@ -23,7 +23,7 @@ The measured ball angle enters through ``psi = theta + psi_w`` (ball-centre angl
 frame); the contact angle is ``phi = ball_angle^{-1}(psi)`` of the candidate's curve
 (Newton) and ``phi_dot = psi_dot / psi'(phi)``, so contour and radius changes are
 propagated to the measurement model too. The frame-only row (no ball) is
-``r1 = k' * (J_f th') - k * Q_theta``.
+``r1 = k' * (J_f th') - k * (Q_theta - G1_f)`` (``G1_f`` the frame's own weight).
 
 Numerics. The kernel is ``cos^4`` with half-width 0.2 s (see :func:`kernel_pair` for why not
 Hann); the model terms are evaluated on every second grid sample (4 ms quadrature nodes,
@@ -38,9 +38,16 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from bfr_model.dynamics import RigidModel, curve_terms, gravity_from_curve, mass_from_curve
+from bfr_model.dynamics import (
+    RigidModel,
+    curve_terms,
+    frame_gravity,
+    gravity_from_curve,
+    joint_torque,
+    mass_from_curve,
+)
 from bfr_model.jit import njit
-from bfr_model.layout import I_CV, I_CW, I_G, I_KU, I_M, I_MUR, I_SW, I_TC, I_VC, I_VR
+from bfr_model.layout import I_CW, I_G, I_JF, I_M, I_MUR, I_SW, I_VR
 from bfr_model.params import RigParams
 from numpy.typing import NDArray
 
@@ -106,7 +113,7 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
         st = np.sin(th)
         ct = np.cos(th)
         g1, g2 = gravity_from_curve(st, ct, px, py, p1x, p1y, P)
-        q1 = P[I_KU] * u[i] - P[I_CV] * thd - P[I_TC] * np.tanh(thd / P[I_VC])
+        q1 = joint_torque(u[i], thd, P)
         # normal force n3 . m (r_dd + g y) (bfr_model.dynamics.rigid_terms; the phi_dd term
         # vanishes for a round ball: n . p' = 0)
         thd2 = thd * thd
@@ -271,10 +278,11 @@ class ResidualEvaluator:
         g = self._grid
         if not prep.has_ball:
             P = model.P
-            jf = P[2]
             thd = prep.theta_dot[g]
-            q1 = P[10] * prep.u[g] - P[5] * thd - P[6] * np.tanh(thd / P[7])
-            r1 = self._conv(jf * thd, self.kd) - self._conv(q1, self.k)
+            th = prep.theta[g]
+            q1 = (joint_torque(prep.u[g], thd, P)
+                  - frame_gravity(np.sin(th), np.cos(th), P))
+            r1 = self._conv(P[I_JF] * thd, self.kd) - self._conv(q1, self.k)
             return Residual(r1, np.full(r1.size, np.nan), self.idx, n=prep.n)
         sel = self._sel
         psi_w, psi_wd = prep.psi_for(sensor)

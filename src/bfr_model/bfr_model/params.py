@@ -137,18 +137,37 @@ class FrameParams:
     is not perpendicular to the shaft: a frame point ``(x, y)`` sits at ``(x cos w, y,
     x sin w)`` in the shaft's coordinates and the ball sways along z by ``x sin w`` (the
     seed's eqs. 2.7-2.9). A pitched shaft is ``environment.axis_misalignment`` instead.
+
+    ``imbalance`` = m_f e [kg m] and ``imbalance_angle`` = theta_e [rad]: the frame's centre
+    of mass sits at ``e [sin theta_e, cos theta_e]`` in frame coordinates (theta_e clockwise
+    from the frame's +y axis, like phi), so its potential energy is
+    ``V_f = m_f e g cos(theta - theta_e)`` and gravity puts the torque
+    ``m_f e g sin(theta - theta_e)`` on the frame (a once-per-turn ripple of the torque).
     """
 
     inertia: float = 1.58e-3
     mass: float = 0.1
     contour: ContourParams = field(default_factory=ContourParams)
     wobble: float = 0.0
+    imbalance: float = 0.0
+    imbalance_angle: float = 0.0
 
     def __post_init__(self) -> None:
         positive("frame.inertia", self.inertia)
         nonnegative("frame.mass", self.mass)
         finite("frame.wobble", self.wobble)
         check(abs(self.wobble) < math.pi / 4, "frame.wobble", "must be within (-pi/4, pi/4)")
+        nonnegative("frame.imbalance", self.imbalance)
+        finite("frame.imbalance_angle", self.imbalance_angle)
+
+    @property
+    def imbalance_moment(self) -> tuple[float, float]:
+        """First mass moment of the frame about the shaft in frame coordinates [kg m].
+
+        ``m_f e (sin theta_e, cos theta_e)``: the kernels' form (a frame point's convention).
+        """
+        return (self.imbalance * math.sin(self.imbalance_angle),
+                self.imbalance * math.cos(self.imbalance_angle))
 
 
 @dataclass(frozen=True)
@@ -198,14 +217,24 @@ class JointParams:
 
 @dataclass(frozen=True)
 class ActuatorParams:
-    """Motor: applied torque = torque_gain [-] * command; command clamped to torque_limit [N m]."""
+    """Motor: applied torque = torque_gain [-] * command + torque_offset [N m].
+
+    The command is clamped to torque_limit [N m]. ``torque_offset`` is what the drive applies
+    at zero command (an amplifier or current-sensor offset); at speed it acts like dry
+    friction that depends on the direction of rotation (docs/diagnosis.md).
+    """
 
     torque_gain: float = 1.0
     torque_limit: float = 0.1
+    torque_offset: float = 0.0
 
     def __post_init__(self) -> None:
         positive("actuator.torque_gain", self.torque_gain)
         positive("actuator.torque_limit", self.torque_limit)
+        finite("actuator.torque_offset", self.torque_offset)
+        check(abs(self.torque_offset) < self.torque_limit, "actuator.torque_offset",
+              f"{self.torque_offset} N m must be smaller than the torque limit "
+              f"{self.torque_limit} N m")
 
 
 @dataclass(frozen=True)
