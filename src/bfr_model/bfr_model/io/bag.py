@@ -446,7 +446,9 @@ def write_recording_bag(path: str | Path, recording: Recording,
     - ``command``: ``Float64MultiArray`` with ``data = [torque]``;
     - ``ball``: ``BallObservation`` (frame ``world``) whenever the held fix or its validity
       changes: ``x, y, phi``, ``theta_used = phi - atan2(x, y)``, ``status`` FOUND or
-      NOT_FOUND; pixel fields NaN;
+      NOT_FOUND; pixel fields NaN; its header stamp is the fix's own time
+      (``extra["ball_stamp"]``, e.g. the exposure) when the recording has one, else ``t[k]``
+      (the log time is ``t[k]``, its arrival);
     - ``truth`` (simulation only): ``SimTruth`` with the ground-truth state, ball centre,
       torque and energies (unknown fields NaN);
     - ``controller`` (when ``phi_dot`` exists): ``ControllerState`` carrying ``phi_dot``.
@@ -497,6 +499,7 @@ def write_recording_bag(path: str | Path, recording: Recording,
             ball_change[1:] = ~same
         truth = rec.has_truth
         nan = float("nan")
+        fix_stamp = rec.extra.get("ball_stamp")
         for k in range(n):
             stamp = _stamp(store, int(ns[k]))
             ts = int(ns[k])
@@ -509,7 +512,10 @@ def write_recording_bag(path: str | Path, recording: Recording,
             if ball_change[k]:
                 valid = bool(rec.ball_valid[k])
                 x, y, ph = (float(rec.ball_x[k]), float(rec.ball_y[k]), float(rec.phi[k]))
-                obs = ball_t(header=header_t(stamp=stamp, frame_id="world"),
+                own = (fix_stamp[k] if fix_stamp is not None and np.isfinite(fix_stamp[k])
+                       else rec.t[k])
+                obs = ball_t(header=header_t(stamp=_stamp(store, round(own * _NS)),
+                                             frame_id="world"),
                              status=ball_t.FOUND if valid else ball_t.NOT_FOUND, valid=valid,
                              confidence=1.0 if valid else 0.0, u=nan, v=nan, radius_px=nan,
                              x=x if valid else nan, y=y if valid else nan,
@@ -928,21 +934,33 @@ class _BallFields:
     y: NDArray[np.float64]
     phi: NDArray[np.float64]
     valid: NDArray[np.bool_]
+    stamp_ns: NDArray[np.float64]   # the held observation's own time [ns] (NaN before one)
 
 
 def _ball_fields(js: _JointStates, obs_msgs: list[RawMessage], decode: _Decoder,
                  notes: list[str]) -> _BallFields:
-    """Hold the latest ball observation (by log time) at each sample.
+    """Hold the latest ball observation, placed at its header stamp, at each sample.
 
-    A valid observation without ``phi`` gets ``theta + atan2(x, y)``.
+    An observation's header stamp is the time of the image it was measured in (the topic
+    contract: the exposure); an observation without one (a zero stamp) is placed at its
+    receive (log) time mapped to the header clock, and the notes say how many. A valid
+    observation without ``phi`` gets ``theta + atan2(x, y)``.
     """
     n = js.stamp.size
     if not obs_msgs:
         return _BallFields(x=np.full(n, np.nan), y=np.full(n, np.nan), phi=np.full(n, np.nan),
-                           valid=np.zeros(n, bool))
-    vals = np.array([[b.x, b.y, b.phi, 1.0 if b.valid else 0.0]
-                     for b in (decode(m) for m in obs_msgs)])
-    sel, have = _hold(_log_ns(obs_msgs, js.offset), vals, js.stamp)
+                           valid=np.zeros(n, bool), stamp_ns=np.full(n, np.nan))
+    obs = [decode(m) for m in obs_msgs]
+    vals = np.array([[b.x, b.y, b.phi, 1.0 if b.valid else 0.0] for b in obs])
+    placed = _header_ns(obs)
+    unstamped = placed <= 0
+    if unstamped.any():
+        placed = np.where(unstamped, _log_ns(obs_msgs, js.offset), placed)
+        notes.append(f"ball: {int(unstamped.sum())} of {len(obs)} observation(s) carry no "
+                     "header stamp: placed at their receive time (on the header clock)")
+    notes.append(f"ball: {int((~unstamped).sum())} observation(s) placed at their header "
+                 "stamp (the image's time)")
+    sel, have = _hold(placed, np.column_stack([vals, placed.astype(np.float64)]), js.stamp)
     valid = have & (sel[:, 3] > 0) & np.isfinite(sel[:, 0]) & np.isfinite(sel[:, 1])
     ball_x = np.where(valid, sel[:, 0], np.nan)
     ball_y = np.where(valid, sel[:, 1], np.nan)
@@ -951,7 +969,8 @@ def _ball_fields(js: _JointStates, obs_msgs: list[RawMessage], decode: _Decoder,
     if bad_phi.any():
         phi[bad_phi] = js.theta[bad_phi] + np.arctan2(ball_x[bad_phi], ball_y[bad_phi])
         notes.append("ball: phi missing in some observations; theta + atan2(x, y) used")
-    return _BallFields(x=ball_x, y=ball_y, phi=phi, valid=valid)
+    return _BallFields(x=ball_x, y=ball_y, phi=phi, valid=valid,
+                       stamp_ns=np.where(have, sel[:, 4], np.nan))
 
 
 #: ``Recording`` field per ``SimTruth`` field read from the ``truth`` topic.
@@ -1046,9 +1065,12 @@ def read_bag(path: str | Path, topic_map: dict[str, str] | None = None, *,
     The time base is the ``joint_states`` header stamps (sorted, duplicates dropped).
     ``torque`` is the latest ``command`` at or before each sample (``effort`` of the joint
     state before the first command, or when there is no command topic). Ball fields hold
-    the latest ``ball`` observation by its receive (log) time; ``phi_dot`` comes from the
-    ``controller`` topic and ground truth from ``truth`` when present. Log times are mapped
-    to the header clock by the median offset between the two on ``joint_states``.
+    the latest ``ball`` observation placed at its header stamp (the image's time; its
+    receive time only for an observation without a stamp, and ``meta["notes"]`` says so),
+    and ``extra["ball_stamp"]`` is the held observation's stamp [s] on the axis of ``t``;
+    ``phi_dot`` comes from the ``controller`` topic and ground truth from ``truth`` when
+    present. Log times are mapped to the header clock by the median offset between the
+    two on ``joint_states``.
 
     Parameters
     ----------
@@ -1086,10 +1108,13 @@ def read_bag(path: str | Path, topic_map: dict[str, str] | None = None, *,
     optional = _optional_fields(js, by_role, decode)
     t, origin = _time_axis(js.stamp, time_origin)
     meta = _bag_meta(contents, p, names, by_role, origin, notes)
+    extra = _extra_arrays(contents, js.stamp.size)
+    if by_role["ball"]:
+        extra["ball_stamp"] = (ball.stamp_ns - origin) / _NS
     try:
         rec = Recording(t=t, theta=js.theta, theta_dot=js.theta_dot, torque=torque,
                         ball_x=ball.x, ball_y=ball.y, ball_valid=ball.valid, phi=ball.phi,
-                        extra=_extra_arrays(contents, js.stamp.size), meta=meta, **optional)
+                        extra=extra, meta=meta, **optional)
     except RecordingError as exc:
         raise BagError(f"{contents.path}: {exc}") from exc
     rec.meta["sample_rate"] = rec.sample_rate()

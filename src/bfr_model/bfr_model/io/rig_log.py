@@ -10,23 +10,34 @@ per reason in :attr:`RigLog.skipped`. ``[inf] initializing hardware..`` starts a
 (one file may hold several runs whose clocks restart, e.g. ``step_response_tau_001``);
 ``[inf] ball was lost`` marks the held camera fix as stale.
 
-The conventions of these logs were inferred from the data (docs/ntnu-rig-conventions.md,
-``python -m bfr_model.io.rig_conventions``) and are applied by :func:`run_to_recording`:
+The conventions of the format were inferred from the NTNU rig's logs
+(docs/ntnu-rig-conventions.md, ``python -m bfr_model.io.rig_conventions``) and are applied by
+:func:`run_to_recording`. What is a fact of one rig (its timing) is never assumed: it is
+measured on every run (:mod:`bfr_model.io.timing`) and reported in
+``meta["sensor_timing"]``.
 
 - ``theta`` has our sign (counter-clockwise positive, theta and phi advance together) and
   its zero agrees with ours modulo pi; it is printed with 6 significant digits, so its
   resolution is 1 mrad for |theta| in [100, 1000) rad and 10 mrad above.
 - ``torque`` has our sign: a positive command accelerates ``theta`` positive.
 - ``x, y`` are the camera's ball centre in the world frame [m] (0, 0 = no ball), held
-  between camera frames (165 Hz against a ~920 Hz loop). At start-up the camera's queued
-  frames are replayed at the loop rate for ~0.9 s (a backlog since program start): those
-  fixes are stale and are marked invalid.
-- The rig's ``phi`` equals ``theta[k - 8] + atan2(x, y)`` at each new fix k: the software
-  pairs each image with the frame angle logged 8 samples (~8.7 ms) earlier. ``phi`` of the
-  recording is recomputed this way (full precision of x, y; defined before the rig's phi
-  estimator initialises, when the rig logs ``phi = atan2(x, y)`` alone).
-- ``dtheta`` is the servo's velocity estimate, the derivative of ``theta`` delayed by
-  ~6.4 ms; ``dphi`` is a filtered derivative of ``phi`` updated at each fix.
+  between camera frames. Any ratio of log lines to camera fixes is read (the NTNU rig: a
+  fix every 5-7 lines of a ~920 Hz loop; another rig may log one line per fix). A camera
+  that queued frames since program start replays them faster than it can take them at
+  start-up (the NTNU rig: ~0.9 s at the loop rate): such a burst is detected on the fixes'
+  own intervals (:func:`bfr_model.io.timing.camera_backlog_end`) and marked invalid.
+- The rig's ``phi`` is ``theta[k - L] + atan2(x, y)`` at each new fix k: its software pairs
+  each image with the frame angle logged L samples earlier (the NTNU rig: L = 8). L is
+  measured on each run (:func:`phi_pairing_lag`; 0 when the log's phi does not follow the
+  rule at any lag) and ``phi`` of the recording is recomputed with it (full precision of
+  x, y; defined before the rig's phi estimator initialises).
+- ``dtheta`` is the servo's velocity estimate; its lag behind the rate of ``theta`` is
+  measured per run (:func:`bfr_model.io.timing.velocity_lag`; the NTNU rig: 6.4 ms) and
+  reported, not applied here (the recording keeps the logged values). ``dphi`` is a
+  filtered derivative of ``phi`` updated at each fix.
+
+:func:`format_rig_log` and :func:`write_rig_log` write recordings in the same format (one
+``initializing hardware`` block per run, numbers with 6 significant digits).
 
 Pure Python + numpy; no ``rclpy``.
 """
@@ -47,18 +58,23 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from bfr_model.io.timing import camera_backlog_end, line_rate, velocity_lag
 from bfr_model.recording import Recording
 
 __all__ = [
     "KEYS",
+    "MAX_PHI_THETA_LAG",
     "RigLog",
     "RigLogError",
     "RigLogWarning",
     "RigRun",
+    "format_rig_log",
     "parse_rig_log",
     "parse_rig_log_text",
     "read_rig_log",
+    "phi_pairing_lag",
     "run_to_recording",
+    "write_rig_log",
 ]
 
 #: Keys of a data line, in order, with their units.
@@ -66,10 +82,8 @@ KEYS = ("t", "torque", "theta", "phi", "dtheta", "dphi", "x", "y")
 UNITS = {"t": "s", "torque": "N m", "theta": "rad", "phi": "rad", "dtheta": "rad/s",
          "dphi": "rad/s", "x": "m", "y": "m"}
 
-#: Samples between the frame angle the rig pairs with an image and the image's arrival.
-RIG_PHI_THETA_LAG_SAMPLES = 8
-#: Delay of the logged ``dtheta`` behind the derivative of ``theta`` [s] (measured).
-RIG_DTHETA_DELAY_S = 0.0064
+#: Largest pairing lag of the log's ``phi`` searched [samples] (:func:`phi_pairing_lag`).
+MAX_PHI_THETA_LAG = 24
 
 _DATA_RE = re.compile(
     r"\[inf\] t=([^,]*),torque=([^,]*),theta=([^,]*),phi=([^,]*),"
@@ -527,24 +541,14 @@ def read_rig_log(path: str | Path, run: int | None = None, *, duplicates: str = 
     return parse_rig_log(path, duplicates=duplicates, warn=warn).recording(run, **options)
 
 
-def _camera_backlog_end(new_fix_idx: NDArray[np.intp], min_burst: int = 10,
-                        steady: int = 10) -> int:
-    """Sample index where the start-up replay of queued camera frames ends (0 if none).
+def _camera_backlog_end(new_fix_idx: NDArray[np.intp], t: NDArray[np.float64]) -> int:
+    """Sample index where a start-up replay of queued camera frames ends (0 if none).
 
-    The backlog shows as new fixes on consecutive samples; it ends at the first fix after
-    which ``steady`` gaps in a row span two samples or more.
+    The burst is found on the fixes' own intervals, whatever the line rate
+    (:func:`bfr_model.io.timing.camera_backlog_end`).
     """
-    if new_fix_idx.size < min_burst + steady:
-        return 0
-    gaps = np.diff(new_fix_idx)
-    if np.count_nonzero(gaps[: min_burst * 4] == 1) < min_burst:
-        return 0
-    ok = (gaps >= 2).astype(np.int64)
-    run_len = np.convolve(ok, np.ones(steady, np.int64), mode="valid")
-    j = np.nonzero(run_len == steady)[0]
-    if j.size == 0:
-        return int(new_fix_idx[-1]) + 1
-    return int(new_fix_idx[j[0] + 1])
+    end = camera_backlog_end(t[new_fix_idx]) if new_fix_idx.size else 0
+    return int(new_fix_idx[end]) if end > 0 else 0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -616,7 +620,7 @@ def _ball_fixes(run: RigRun, raw: _RigColumns, *, stale_after: float, drop_backl
     changed[1:] = (x[1:] != x[:-1]) | (y[1:] != y[:-1]) | ~seen[:-1]
     new_fix = seen & changed
     fix_idx = np.nonzero(new_fix)[0]
-    backlog_end = _camera_backlog_end(fix_idx) if drop_backlog else 0
+    backlog_end = _camera_backlog_end(fix_idx, t) if drop_backlog else 0
     last_fix = np.maximum.accumulate(np.where(new_fix, idx, -1))
     has_fix = last_fix >= 0
     age = np.where(has_fix, t - t[np.maximum(last_fix, 0)], np.inf)
@@ -653,9 +657,60 @@ def _theta_resolution(theta_raw: NDArray[np.float64]) -> float:
     return 10.0 ** (math.floor(math.log10(magnitude)) - 5) if magnitude > 0 else 1e-6
 
 
+def phi_pairing_lag(raw_theta: NDArray[np.float64], raw_phi: NDArray[np.float64],
+                    x: NDArray[np.float64], y: NDArray[np.float64],
+                    dtheta: NDArray[np.float64], new_fix: NDArray[np.bool_],
+                    resolution: float, max_lag: int = MAX_PHI_THETA_LAG) -> int | None:
+    """The lag L [samples] with which the log's ``phi`` pairs ``theta[k - L] + atan2(x, y)``.
+
+    Tested at the new fixes where the frame turns (``|dtheta| > 1 rad/s``, so that a wrong
+    lag shows) and the log's phi agrees with the rule within 0.5 rad at some lag (its
+    estimator initialised): the lag whose median absolute residual is smallest, when that
+    is within twice theta's print resolution. None when the log's phi does not follow the
+    rule (or the frame hardly turns, or too few fixes).
+    """
+    k = np.nonzero(new_fix & (np.abs(dtheta) > 1.0))[0]
+    k = k[k >= max_lag]
+    if k.size < 20:
+        return None
+    psi = np.arctan2(x[k], y[k])
+    med = []
+    for lag in range(max_lag + 1):
+        r = raw_phi[k] - (raw_theta[k - lag] + psi)
+        r = (r + np.pi) % (2 * np.pi) - np.pi
+        r = r[np.abs(r) < 0.5]
+        med.append(float(np.median(np.abs(r))) if r.size > 0.5 * k.size else math.inf)
+    best = int(np.argmin(med))
+    return best if med[best] <= 2.0 * resolution + 1e-12 else None
+
+
+def _sensor_timing(raw: _RigColumns, fix_idx: NDArray[np.intp], backlog_end: int,
+                   lag: Any) -> dict[str, Any]:
+    """What the run's own data say about its timing (module docstring; no rig's constants).
+
+    Line rate, camera fix rate and interval after any backlog, lines per fix, and the
+    measured lag of ``dtheta`` (:class:`bfr_model.io.timing.VelocityLag`).
+    """
+    t = raw.t
+    steady = fix_idx[fix_idx >= backlog_end]
+    out: dict[str, Any] = {"line_rate_hz": line_rate(t),
+                           "line_interval_median_s": float(np.median(np.diff(t)))
+                           if t.size > 1 else float("nan"),
+                           "fixes": int(fix_idx.size), "backlog_fixes":
+                           int(np.count_nonzero(fix_idx < backlog_end)),
+                           "velocity_lag": lag.to_json()}
+    if steady.size > 2:
+        d = np.diff(t[steady])
+        out["camera_rate_hz"] = float((steady.size - 1) / (t[steady[-1]] - t[steady[0]]))
+        out["fix_interval_median_s"] = float(np.median(d))
+        out["lines_per_fix"] = float((steady[-1] - steady[0]) / (steady.size - 1))
+    return out
+
+
 def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
                   conversions: list[str], notes: list[str], shift: float, theta_res: float,
-                  backlog_end: int, phi_theta_lag: int, stale_after: float) -> dict[str, Any]:
+                  backlog_end: int, phi_theta_lag: int, stale_after: float,
+                  timing: dict[str, Any]) -> dict[str, Any]:
     """``Recording.meta`` of a converted run: provenance, conversions and rig conventions."""
     n = t.shape[0]
     return {
@@ -671,12 +726,14 @@ def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
         "theta_turn_shift": shift,
         "theta_resolution": theta_res,
         "camera_backlog_end_t": float(t[min(backlog_end, n - 1)]) if backlog_end else None,
+        "sensor_timing": timing,
         "rig_conventions": {
             "theta_sign": 1,
             "torque_sign": 1,
             "xy_frame": "world",
             "phi_theta_lag_samples": int(phi_theta_lag),
-            "dtheta_delay_s": RIG_DTHETA_DELAY_S,
+            "dtheta_delay_s": timing["velocity_lag"]["lag_s"],
+            "dtheta_delay_measured": bool(timing["velocity_lag"]["identified"]),
             "stale_after_s": float(stale_after),
             "doc": "docs/ntnu-rig-conventions.md",
         },
@@ -684,8 +741,7 @@ def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
 
 
 def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bool = True,
-                     stale_after: float = 0.1,
-                     phi_theta_lag: int = RIG_PHI_THETA_LAG_SAMPLES,
+                     stale_after: float = 0.1, phi_theta_lag: int | None = None,
                      camera_offset: tuple[float, float] = (0.0, 0.0),
                      drop_backlog: bool = True) -> Recording:
     """Convert one raw run to a :class:`Recording` in our conventions.
@@ -702,9 +758,10 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     stale_after : float
         A held fix older than this [s] is invalid (normal gaps are <= 11 ms). Also after an
         ``[inf] ball was lost`` message until the next new fix.
-    phi_theta_lag : int
-        Samples between a fix's arrival and the frame angle paired with it in ``phi``
-        (the rig's software uses 8).
+    phi_theta_lag : int, optional
+        Samples between a fix's arrival and the frame angle paired with it in ``phi``;
+        default: measured on the run (:func:`phi_pairing_lag`; the NTNU rig's software uses
+        8), 0 when the log's phi does not follow the rule.
     camera_offset : (float, float)
         Camera origin offset ``(cx, cy)`` [m] subtracted from ``x, y`` (default: none; the
         measured offsets are in docs/ntnu-rig-conventions.md).
@@ -723,13 +780,27 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
         conversions.append(f"subtracted camera offset (cx, cy) = ({cx}, {cy}) m from x, y")
     shift = _turn_shift(raw.theta, rebase_turns, conversions)
     theta = raw.theta - shift
-
+    theta_res = _theta_resolution(raw.theta)
+    new_fix = fixes.seen & (np.arange(raw.t.size) == fixes.last_fix)
+    fix_idx = np.nonzero(new_fix)[0]
+    if phi_theta_lag is None:
+        found = phi_pairing_lag(raw.theta, raw.phi, raw.x, raw.y, raw.dtheta,
+                                new_fix & (np.arange(raw.t.size) >= fixes.backlog_end),
+                                theta_res)
+        phi_theta_lag = 0 if found is None else found
+        how = ("measured on this run" if found is not None else
+               "the log's phi follows theta[k - L] + atan2(x, y) at no lag: L = 0")
+    else:
+        how = "given"
     lag_src = np.maximum(np.arange(raw.t.shape[0]) - int(phi_theta_lag), 0)
     phi_fix = theta[lag_src] + np.arctan2(bx, by)
     phi = np.where(fixes.valid, phi_fix[np.maximum(fixes.last_fix, 0)], np.nan)
     conversions.append(f"phi recomputed as theta[k - {phi_theta_lag}] + atan2(x, y) at each "
-                       f"new fix k and held (the rig's own pairing); rig phi kept in "
-                       f"extra['phi_rig']")
+                       f"new fix k and held (the rig's own pairing, L {how}); rig phi kept "
+                       "in extra['phi_rig']")
+    vlag = velocity_lag(raw.t, raw.theta, raw.dtheta)
+    notes.append(f"dtheta: {vlag.note} (measured on this run; not applied by the reader)")
+    timing = _sensor_timing(raw, fix_idx, fixes.backlog_end, vlag)
     phi_rig_ours = np.where(fixes.seen, raw.phi - shift, np.nan)
     initialised = np.abs(phi_rig_ours - phi) < 0.5
     phi_dot = np.where(fixes.valid & initialised, raw.dphi, np.nan)
@@ -744,13 +815,66 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
         extra={"phi_rig": phi_rig_ours, "dphi_rig": raw.dphi,
                "ball_seen": fixes.seen.astype(float)},
         meta=_rig_log_meta(run, raw.t, source=source, conversions=conversions, notes=notes,
-                           shift=shift, theta_res=_theta_resolution(raw.theta),
+                           shift=shift, theta_res=theta_res,
                            backlog_end=fixes.backlog_end, phi_theta_lag=phi_theta_lag,
-                           stale_after=stale_after),
+                           stale_after=stale_after, timing=timing),
     )
     rec.meta["sample_rate"] = rec.sample_rate()
     rec.meta["camera_fix_rate"] = rec.camera_fix_rate()
     return rec
+
+
+def _g(value: float, digits: int) -> str:
+    """``value`` printed as a C++ output stream prints a double (``digits`` significant)."""
+    return format(float(value), f".{digits}g")
+
+
+def format_rig_log(runs: Recording | list[Recording], *, digits: int = 6) -> str:
+    """Recordings as the text of a rig's terminal log (module docstring).
+
+    Each recording becomes one run: ``[inf] initializing hardware..``, ``[inf] done``, one
+    data line per sample, ``[inf] stopped``. ``x, y`` are the held fix (``0, 0`` where no
+    valid fix), ``phi`` the recording's ``phi`` (0 without a fix), ``dtheta`` its
+    ``theta_dot``, ``dphi`` its ``phi_dot`` (0 where absent). Numbers have ``digits``
+    significant digits, as a C++ stream prints them (the NTNU rig: 6), so what a reader gets
+    back is quantised like a real log: theta to 1 mrad above 100 rad.
+
+    Parameters
+    ----------
+    runs : Recording or list of Recording
+        The runs, in order (their clocks may restart).
+    digits : int
+        Significant digits of every number.
+
+    Returns
+    -------
+    str
+        The log's text (lines end in ``\n``).
+    """
+    recs = [runs] if isinstance(runs, Recording) else list(runs)
+    out = ["Script started by bfr_model.io.rig_log.format_rig_log"]
+    for rec in recs:
+        out += ["[inf] initializing hardware..", "[inf] done"]
+        v = rec.ball_valid
+        x = np.where(v, rec.ball_x, 0.0)
+        y = np.where(v, rec.ball_y, 0.0)
+        phi = np.where(v & np.isfinite(rec.phi), rec.phi, 0.0)
+        dphi = (np.zeros(rec.n) if rec.phi_dot is None
+                else np.where(np.isfinite(rec.phi_dot), rec.phi_dot, 0.0))
+        cols = (rec.t, rec.torque, rec.theta, phi, rec.theta_dot, dphi, x, y)
+        for row in zip(*(c.tolist() for c in cols), strict=True):
+            out.append("[inf] " + ",".join(f"{k}={_g(val, digits)}"
+                                           for k, val in zip(KEYS, row, strict=True)))
+        out.append("[inf] stopped")
+    return "\n".join(out) + "\n"
+
+
+def write_rig_log(path: str | Path, runs: Recording | list[Recording], *,
+                  digits: int = 6) -> Path:
+    """Write :func:`format_rig_log` of ``runs`` to ``path`` (a new file); returns the path."""
+    p = Path(path)
+    p.write_text(format_rig_log(runs, digits=digits))
+    return p
 
 
 def _main(argv: list[str] | None = None) -> int:
