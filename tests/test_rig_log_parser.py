@@ -14,6 +14,7 @@ from bfr_model.io.rig_log import (
     parse_rig_log_text,
     read_rig_log,
 )
+from bfr_model.recording import Recording
 
 DATA = Path(os.environ.get("BFR_RIG_DATA", Path(__file__).resolve().parents[1].parent
                            / "shared" / "data" / "ntnu-rig"))
@@ -218,15 +219,13 @@ def test_fin_phi_estimator_jump_does_not_leak() -> None:
 
 
 def _synthetic_run(rate: float, fix_every: int, duration: float = 8.0, lag: float = 0.0,
-                   pair: int = 0, backlog: int = 0, t0: float = 4.0):  # noqa: ANN202
+                   pair: int = 0, backlog: int = 0, t0: float = 4.0) -> Recording:
     """A Recording as a rig logging at ``rate`` Hz with a fix every ``fix_every`` lines.
 
     The frame turns with a varying speed; ``dtheta`` is its exact rate ``lag`` seconds late;
     the log's phi pairs theta ``pair`` lines earlier; ``backlog`` fixes replayed one per
     line at the start.
     """
-    from bfr_model.recording import Recording  # noqa: PLC0415 - local to these tests
-
     t = t0 + np.arange(int(duration * rate)) / rate
     th = 300.0 + 2.0 * (t - t0) + 0.3 * np.sin(3.0 * (t - t0))
 

@@ -71,8 +71,8 @@ __all__ = [
     "format_rig_log",
     "parse_rig_log",
     "parse_rig_log_text",
-    "read_rig_log",
     "phi_pairing_lag",
+    "read_rig_log",
     "run_to_recording",
     "write_rig_log",
 ]
@@ -830,7 +830,7 @@ def _g(value: float, digits: int) -> str:
 
 
 def format_rig_log(runs: Recording | list[Recording], *, digits: int = 6) -> str:
-    """Recordings as the text of a rig's terminal log (module docstring).
+    r"""Recordings as the text of a rig's terminal log (module docstring).
 
     Each recording becomes one run: ``[inf] initializing hardware..``, ``[inf] done``, one
     data line per sample, ``[inf] stopped``. ``x, y`` are the held fix (``0, 0`` where no

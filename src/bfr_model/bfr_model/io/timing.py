@@ -31,6 +31,7 @@ Pure numpy; no ``rclpy``.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -84,7 +85,7 @@ def _detrend_blocks(y: FloatArray, k: int) -> FloatArray:
     out = np.empty_like(y)
     nb = max(y.size // k, 1)
     edges = np.linspace(0, y.size, nb + 1).astype(int)
-    for a, b in zip(edges[:-1], edges[1:], strict=True):
+    for a, b in itertools.pairwise(edges):
         x = np.arange(b - a, dtype=float)
         x -= x.mean()
         seg = y[a:b] - y[a:b].mean()
