@@ -396,8 +396,15 @@ class RigParams:
         bumps that only the contact model (bfr_model.contact) can roll over belong in
         ``track.asperity_*``, which this check (and the rigid model) leaves out.
         """
-        curve = OffsetCurve.from_params(self)
-        lam_min = curve.min_speed()
+        c, t = self.frame.contour, self.track
+        key = (c.a, c.b, c.harmonic_orders, c.harmonic_cos, c.harmonic_sin, t.bump_phi,
+               t.bump_height, t.bump_width, self.ball.rolling_radius)
+        lam_min = _RIGID_CHECKS.get(key)
+        if lam_min is None:  # the same curve is checked once (fits change other entries)
+            lam_min = OffsetCurve.from_params(self).min_speed()
+            if len(_RIGID_CHECKS) > 1024:
+                _RIGID_CHECKS.clear()
+            _RIGID_CHECKS[key] = lam_min
         check(lam_min > 0.0, "frame.contour / track.bump_*",
                "the ball-centre curve has a cusp (a concave part of the track is sharper "
                f"than the rolling radius R = {self.ball.rolling_radius:.4g} m; min |p'| = "
@@ -421,6 +428,8 @@ class RigParams:
 
     def replace(self, **changes: Any) -> RigParams:
         """Return a copy with dotted-name changes, e.g. ``replace(**{"ball.mass": 3e-3})``."""
+        if changes and all(not isinstance(v, (list, tuple, dict)) for v in changes.values()):
+            return _replace_scalars(self, changes)
         d = params_to_dict(self)
         for key, value in changes.items():
             node = d
@@ -433,6 +442,39 @@ class RigParams:
                 raise ParameterError(f"parameter {key}: unknown name {parts[-1]!r}")
             node[parts[-1]] = value
         return params_from_dict(d)
+
+
+#: Smallest arc-length rate of each ball-centre curve checked (:meth:`RigParams.check_rigid`).
+_RIGID_CHECKS: dict[tuple, float] = {}
+
+
+def _replace_scalars(params: Any, changes: dict[str, Any]) -> Any:
+    """:meth:`RigParams.replace` for scalar values: nested ``dataclasses.replace``.
+
+    Every dataclass on the way is rebuilt, so every check of its ``__post_init__`` runs.
+    """
+    here: dict[str, Any] = {}
+    deeper: dict[str, dict[str, Any]] = {}
+    for key, value in changes.items():
+        head, _, rest = key.partition(".")
+        names = {f.name for f in dataclasses.fields(params)}
+        if head not in names:
+            what = "group" if rest else "name"
+            raise ParameterError(f"parameter {key}: unknown {what} {head!r}")
+        if rest:
+            if not dataclasses.is_dataclass(getattr(params, head)):
+                raise ParameterError(f"parameter {key}: unknown group {head!r}")
+            deeper.setdefault(head, {})[rest] = value
+        else:
+            if dataclasses.is_dataclass(getattr(params, head)):
+                raise ParameterError(f"parameter {key}: {head!r} is a group, not a value")
+            here[head] = value
+    for head, sub in deeper.items():
+        here[head] = _replace_scalars(getattr(params, head), sub)
+    try:
+        return dataclasses.replace(params, **here)
+    except TypeError as exc:
+        raise ParameterError(f"parameter {sorted(changes)}: {exc}") from exc
 
 
 def default_params_path() -> Path:

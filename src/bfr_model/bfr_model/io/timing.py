@@ -10,6 +10,13 @@ logged angle ``theta`` by ``d`` integrates to ``theta`` only when advanced by ``
 
     theta(t) - theta(t0) = int_t0^t v(s + d) ds                                         (1)
 
+A velocity estimator is a filter, not only a delay: a first-order lag of time constant tau
+is, to second order, the delay tau with ``v_true = v(t + d) + c2 v''(t + d)``, ``c2 =
+-tau^2 / 2``; a moving average over a window L is the delay L / 2 with ``c2 = +L^2 / 24``.
+Both terms are measured: after d, the remaining error of (1) is ``c2 v'(t + d)`` plus a
+constant (the integral of ``c2 v''``), and c2 is its least-squares coefficient on the
+smoothed ``v'(t + d)`` (same blocks). :func:`corrected_velocity` applies both.
+
 To first order in d, ``int v(s + d) ds = int v(s) ds + d (v(t) - v(t0))``, so the error of
 the unshifted integral ``e(t) = theta(t) - theta(t0) - int_t0^t v ds`` is ``d v(t)`` plus a
 constant. An offset of v makes the integral drift, so in each block of ``window`` seconds a
@@ -37,8 +44,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.signal import savgol_filter
 
-__all__ = ["VelocityLag", "camera_backlog_end", "line_rate", "velocity_lag"]
+__all__ = ["VelocityLag", "camera_backlog_end", "corrected_velocity", "line_rate",
+           "velocity_lag"]
 
 FloatArray = NDArray[np.float64]
 
@@ -57,9 +66,13 @@ class VelocityLag:
         The velocity varies enough for the lag to matter and be measured: std < 1 ms, and
         the shift removes a tenth of the error or is within two standard errors of zero.
     rms_unshifted, rms_shifted : float
-        RMS of the high-passed error of eq. (1) without and with the shift [rad].
+        RMS of the detrended error of eq. (1) without and with the correction [rad].
     note : str
         What was found, for reports.
+    c2 : float
+        The second-order term [s^2] (module docstring; 0 when not measured).
+    c2_std : float
+        Its standard error [s^2].
     """
 
     lag: float
@@ -68,10 +81,14 @@ class VelocityLag:
     rms_unshifted: float
     rms_shifted: float
     note: str
+    c2: float = 0.0
+    c2_std: float = math.inf
 
-    def to_json(self) -> dict[str, float | bool | str]:
+    def to_json(self) -> dict[str, float | bool | str | None]:
         """JSON-ready dict (inf as None)."""
         return {"lag_s": self.lag, "std_s": self.std if math.isfinite(self.std) else None,
+                "c2_s2": self.c2,
+                "c2_std_s2": self.c2_std if math.isfinite(self.c2_std) else None,
                 "identified": self.identified, "rms_unshifted_rad": self.rms_unshifted,
                 "rms_shifted_rad": self.rms_shifted, "note": self.note}
 
@@ -161,28 +178,65 @@ def velocity_lag(t: FloatArray, theta: FloatArray, theta_dot: FloatArray, *,
                            f"{max_lag * 1e3:.0f} ms: not identified, none applied")
     e = error(d)
     rms1 = float(np.sqrt(np.mean(e ** 2)))
-    # standard error, with the residual's correlation time (samples to the first
-    # autocorrelation below 1/e, at least one)
-    ec = e - e.mean()
-    var = float(np.dot(ec, ec))
-    tau = 1
-    if var > 0.0:
-        for lag in range(1, min(ec.size // 4, 2000)):
-            if float(np.dot(ec[:-lag], ec[lag:])) / var < math.exp(-1.0):
-                break
-            tau = lag + 1
-    std = math.sqrt(var / max(hv.size - 1, 1) * tau / den) if var > 0 else 0.0
+    std = _coefficient_std(e, den, hv.size)
     # measured: a small standard error, and a shift that explains the error (a lag
     # indistinguishable from zero needs no explaining)
     identified = bool(std < 1e-3 and (rms1 < 0.9 * rms0 or abs(d) < 2.0 * std))
+    c2, c2_std = 0.0, math.inf
+    if identified:  # the second-order term: e on the smoothed v'(t + d)
+        vs = np.interp(tg + d, t, theta_dot)
+        win = max(int(0.03 / step) | 1, 5)
+        X = _detrend_blocks(savgol_filter(vs, win, 3, deriv=1, delta=step)[edge:-edge], k)
+        dx = float(np.dot(X, X))
+        if dx > 0.0:
+            c = float(np.dot(e, X) / dx)
+            c_std = _coefficient_std(e - c * X, dx, X.size)
+            if abs(c) > 3.0 * c_std:
+                c2, c2_std = c, c_std
+                e = e - c * X
+                rms1 = float(np.sqrt(np.mean(e ** 2)))
     if identified:
         note = (f"logged velocity lags the angle's rate by {d * 1e3:.2f} ms "
-                f"(+- {std * 1e3:.2f}); advanced by that")
+                f"(+- {std * 1e3:.2f})" + (
+                    f", second-order term {c2 * 1e6:+.2f} ms^2 (as a first-order lag of "
+                    f"{math.sqrt(-2 * c2) * 1e3:.1f} ms)" if c2 < 0 else
+                    f", second-order term {c2 * 1e6:+.2f} ms^2 (as a moving average of "
+                    f"{math.sqrt(24 * c2) * 1e3:.1f} ms)" if c2 > 0 else "")
+                + "; corrected by that")
     else:
         note = (f"velocity lag not identified ({d * 1e3:.2f} +- {std * 1e3:.2f} ms; the "
                 "velocity hardly varies): none applied")
     return VelocityLag(lag=d if identified else 0.0, std=std if identified else math.inf,
-                       identified=identified, rms_unshifted=rms0, rms_shifted=rms1, note=note)
+                       identified=identified, rms_unshifted=rms0, rms_shifted=rms1, note=note,
+                       c2=c2, c2_std=c2_std)
+
+
+def _coefficient_std(resid: FloatArray, den: float, n: int) -> float:
+    """Standard error of a least-squares coefficient ``<e, x> / den`` from its residual,
+    inflated by the residual's correlation time (samples to the first autocorrelation
+    below 1/e, at least one)."""
+    ec = resid - resid.mean()
+    var = float(np.dot(ec, ec))
+    if var <= 0.0 or den <= 0.0:
+        return 0.0
+    tau = 1
+    for lag in range(1, min(ec.size // 4, 2000)):
+        if float(np.dot(ec[:-lag], ec[lag:])) / var < math.exp(-1.0):
+            break
+        tau = lag + 1
+    return math.sqrt(var / max(n - 1, 1) * tau / den)
+
+
+def corrected_velocity(t: FloatArray, theta_dot: FloatArray, tg: FloatArray, lag: float,
+                       c2: float = 0.0) -> FloatArray:
+    """The true rate on the grid ``tg`` from a logged velocity (module docstring):
+    ``v(t + d) + c2 v''(t + d)`` (``v''`` by a cubic Savitzky-Golay filter of 30 ms)."""
+    v = np.interp(tg + lag, t, theta_dot)
+    if c2 == 0.0 or tg.size < 7:
+        return v
+    step = float(tg[1] - tg[0])
+    win = max(int(0.03 / step) | 1, 5)
+    return v + c2 * savgol_filter(v, win, 3, deriv=2, delta=step)
 
 
 def camera_backlog_end(fix_t: FloatArray, steady: int = 10, min_burst: int = 10) -> int:
