@@ -296,9 +296,15 @@ def _calibrate(prob: Problem, pieces: list[list[Piece]], opts: DiagnoseOptions, 
                 "preprocessing), plus twice the residual's change with the filter widths "
                 "(x1.4), the processing's own resolution"
                 + ("" if opts.null else "; thresholds not computed (--no-null): 5 % gain")),
-        rms_null=[[float(np.sqrt(np.nanmean(n.msq[r]))) for r in range(3)] for n in noises],
+        rms_null=[[_rms(n.msq[r]) for r in range(3)] for n in noises],
         msq=[n.msq for n in noises])
     return noises, sensors0, null
+
+
+def _rms(msq: np.ndarray) -> float | None:
+    """Root of the mean of the finite entries (None when there are none)."""
+    x = msq[np.isfinite(msq)]
+    return float(np.sqrt(np.mean(x))) if x.size else None
 
 
 # -- plausibility, verdict, notes -------------------------------------------------------------

@@ -252,8 +252,7 @@ def _processing_term(pieces: list[Piece], prep: Any, base: RigParams, pcfg: Prep
     Savitzky-Golay windows) is 1.4 times as long; None when the longer filters change which
     samples are usable, or leave none.
     """
-    alt = replace(pcfg, sg_theta=1.4 * pcfg.sg_theta, sg_ball=1.4 * pcfg.sg_ball,
-                  antialias=1.4 * pcfg.antialias)
+    alt = replace(pcfg, width_factor=1.4 * pcfg.width_factor)
     try:
         ev_a = ResidualEvaluator(prepare_pieces(pieces, alt, latency0=prep.latency0),
                                  replace(rcfg, half_width=ev.half_width))

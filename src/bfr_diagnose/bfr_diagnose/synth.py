@@ -49,8 +49,8 @@ from bfr_model.recording import Recording, ball_centre_angle
 from bfr_sim.closed_loop import SensorConfig, orbit_initial_state, run_closed_loop
 from numpy.typing import NDArray
 
-__all__ = ["LogConventions", "SynthConfig", "TrueRun", "contact_recording", "log_recording",
-           "stabilised_recording"]
+__all__ = ["LogConventions", "SynthConfig", "TrueRun", "contact_recording",
+           "held_frame_recording", "log_recording", "stabilised_recording"]
 
 FloatArray = NDArray[np.float64]
 
@@ -404,4 +404,52 @@ def contact_recording(plant: RigParams, controller_params: RigParams, cfg: Synth
     rec = log_recording(run, cfg.camera_latency, cfg.log, source)
     rec.meta.update(ball_rolled=bool(run.summary["ball_rolling"]), loop=run.summary,
                     plant_model="contact")
+    return rec
+
+
+def held_frame_recording(plant: RigParams, cfg: SynthConfig, rng: np.random.Generator, *,
+                         theta: float = 0.0, phi0: float = 0.35, phi_dot0: float = 0.0,
+                         source: str = "synthetic (frame held)") -> Recording:
+    """The frame held still, the ball rolling freely on it and settling (a rig's frame-held
+    run, like the NTNU ``rolling_data``).
+
+    The rigid plant with the frame's inertia made enormous (the frame does not move; the
+    ball's torque on it turns it by nanoradians), no torque, the ball started at ``phi0``
+    with ``phi_dot0``; the camera (rate, latency, noise of ``cfg``) and the logger
+    (:class:`LogConventions`) as in :func:`stabilised_recording`, one log line per
+    millisecond unless ``cfg.log.log_rate`` says otherwise.
+
+    Returns
+    -------
+    Recording
+        With ground truth; the frame's angle is exactly ``theta`` in the truth.
+    """
+    held = plant.replace(**{"frame.inertia": 1e6})
+    model = RigidModel(held)
+    rate = float(cfg.log.log_rate or 1000.0)
+    dt = 1.0 / rate / math.ceil(1.0 / rate / _PLANT_DT_MAX - 1e-9)
+    n_sub = round(1.0 / rate / dt)
+    n = round(cfg.duration * rate) + 1
+    x = np.array([theta, phi0, 0.0, phi_dot0, 0.0, 0.0])
+    xs = np.empty((n, 4))
+    fine = [x[:4].copy()]
+    for k in range(n):
+        xs[k] = x[:4]
+        if k < n - 1:
+            for _ in range(n_sub):
+                x = model.step(x, 0.0, dt, 1)
+                fine.append(x[:4].copy())
+    t = np.arange(n) / rate
+    tf = np.arange(len(fine)) * dt
+    xf = np.array(fine)
+    cam_t = np.arange(0.0, t[-1], 1.0 / cfg.camera_rate)
+    pos = model.ball_position(np.column_stack([np.interp(cam_t, tf, xf[:, i])
+                                               for i in range(4)]))
+    noise = cfg.camera_noise * rng.standard_normal(pos.shape)
+    run = TrueRun(t=t, x=xs, u=np.zeros(n), cam_t=cam_t, cam_x=pos[:, 0] + noise[:, 0],
+                  cam_y=pos[:, 1] + noise[:, 1], cam_valid=np.ones(cam_t.size, bool),
+                  ball_xy=model.ball_position(xs), summary={"ball_rolling": True})
+    rec = log_recording(run, cfg.camera_latency, cfg.log, source)
+    rec.meta.update(ball_rolled=True, loop={"ball_rolling": True}, plant_model="rigid",
+                    frame_held=True)
     return rec

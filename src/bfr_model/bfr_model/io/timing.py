@@ -44,6 +44,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_filter
 
 __all__ = ["VelocityLag", "camera_backlog_end", "corrected_velocity", "line_rate",
@@ -230,8 +231,10 @@ def _coefficient_std(resid: FloatArray, den: float, n: int) -> float:
 def corrected_velocity(t: FloatArray, theta_dot: FloatArray, tg: FloatArray, lag: float,
                        c2: float = 0.0) -> FloatArray:
     """The true rate on the grid ``tg`` from a logged velocity (module docstring):
-    ``v(t + d) + c2 v''(t + d)`` (``v''`` by a cubic Savitzky-Golay filter of 30 ms)."""
-    v = np.interp(tg + lag, t, theta_dot)
+    ``v(t + d) + c2 v''(t + d)`` (v by a cubic spline through its samples, ``v''`` by a cubic
+    Savitzky-Golay filter of 30 ms)."""
+    v = (CubicSpline(t, theta_dot)(np.clip(tg + lag, t[0], t[-1])) if t.size > 3
+         else np.interp(tg + lag, t, theta_dot))
     if c2 == 0.0 or tg.size < 7:
         return v
     step = float(tg[1] - tg[0])
