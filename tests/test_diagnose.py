@@ -47,7 +47,6 @@ CASES = {
                         1.5e-4, 0.0),
     "frame_inertia": ({"frame.inertia": 1.58e-3 * 1.1}, "J_f", 1.58e-3 * 1.1, 1.58e-3),
     "torque_gain": ({"actuator.torque_gain": 0.9}, "k_u", 0.9, 1.0),
-    "axis_misalignment": ({"environment.axis_misalignment": 0.25}, "eps", 0.25, 0.0),
     "rolling_resistance": ({"track.rolling_resistance": 1e-2}, "mu_rol", 1e-2, 0.0),
     "track_bumps": ({"track.bump_phi": (2.0,), "track.bump_height": (6e-4,),
                      "track.bump_width": (0.12,)}, "h", 6e-4, 0.0),

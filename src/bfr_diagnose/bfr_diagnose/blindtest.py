@@ -142,8 +142,7 @@ def _draw_effect(name: str, base: RigParams, rng: np.random.Generator, scale: fl
     scalar = {"joint_coulomb_friction": ("joint.coulomb_friction", 0.0, 1e-3, 3e-3),
               "joint_viscous_friction": ("joint.viscous_friction", 0.0, 3e-4, 1e-3),
               "rolling_resistance": ("track.rolling_resistance", 0.0, 8e-3, 1.6e-2),
-              "torque_offset": ("actuator.torque_offset", 0.0, 5e-4, 2e-3),
-              "axis_misalignment": ("environment.axis_misalignment", 0.0, 0.2, 0.35)}
+              "torque_offset": ("actuator.torque_offset", 0.0, 5e-4, 2e-3)}
     if name in scalar:
         key, nom, lo, hi = scalar[name]
         v = nom + (sign if name == "torque_offset" else 1.0) * mag(lo, hi)
@@ -216,7 +215,7 @@ def draw_sensors(rng: np.random.Generator, writer: str) -> SensorDraw:
 
 _PAIRS = [("joint_viscous_friction", "rolling_resistance"), ("torque_offset", "track_bumps"),
           ("joint_coulomb_friction", "ball_mass"), ("torque_gain", "frame_shape"),
-          ("frame_inertia", "axis_misalignment"), ("frame_imbalance", "rolling_resistance"),
+          ("frame_inertia", "plate_distance"), ("frame_imbalance", "rolling_resistance"),
           ("plate_distance", "joint_viscous_friction"), ("torque_offset", "frame_contour"),
           ("ball_inertia", "joint_coulomb_friction"), ("frame_imbalance", "torque_gain")]
 
@@ -324,8 +323,6 @@ def _param_error(name: str, true: list[float], fit: dict[str, float], base: RigP
         b0 = np.array(eff.start(base), float)
         return float(np.linalg.norm(a - b) / max(np.linalg.norm(b - b0), 1e-300))
     nominal = float(eff.start(base)[0])
-    if name == "axis_misalignment":
-        nominal = base.environment.axis_misalignment
     return abs(est[0] - true[0]) / max(abs(true[0] - nominal), 1e-300)
 
 
@@ -424,7 +421,7 @@ def score(results: list[dict[str, Any]]) -> dict[str, Any]:
 
 _SHORT = {"joint_coulomb_friction": "T_c", "joint_viscous_friction": "c_v",
           "torque_offset": "tau0", "frame_imbalance": "imbal", "frame_inertia": "J_f",
-          "torque_gain": "k_u", "axis_misalignment": "axis", "rolling_resistance": "mu",
+          "torque_gain": "k_u", "rolling_resistance": "mu",
           "track_bumps": "bumps", "ball_mass": "m_b", "ball_inertia": "J_b",
           "plate_distance": "d_f", "frame_contour": "a,b", "frame_shape": "shape"}
 

@@ -17,7 +17,6 @@ torque_offset            tau_0 (N m): the drive's torque at zero command   actua
 frame_imbalance          M_x, M_y (kg m): m_f e [sin, cos] theta_e         frame.imbalance(_a.)
 frame_inertia            J_f (kg m^2)                                      frame.inertia
 torque_gain              k_u (-)                                           actuator.torque_gain
-axis_misalignment        eps (rad), fitted as 1 - cos(eps)                 environment.axis_m.
 rolling_resistance       mu_rol (-)                                        track.rolling_res.
 track_bumps              phi_b (rad), h (m), w (rad): Gaussian bump        track.bump_*
 ball_mass                m_b (kg), J_b scaled with it (the same shell)     ball.mass, .inertia
@@ -33,6 +32,14 @@ relative to its mass ``J_b / m_b`` (the ball's row is homogeneous in m_b and J_b
 two numbers. ``plate_distance`` moves the first, ``ball_inertia`` the second; the ball's own
 radius (measured with a caliper) would move both and is not a separate effect (fitted alone
 it is indistinguishable from the groove, the two explaining the same data to four digits).
+
+Not in the library: a shaft pitched from horizontal (``environment.axis_misalignment``, a
+term of the model). It lowers the in-plane gravity to ``g cos(eps)``, and in the ball's rows
+that is the same as every length of the frame ``1 / cos(eps)`` times larger (the ball's
+time scale is ``sqrt(length / g)``), which a camera of unknown scale sees as the nominal
+frame; the frame's row sees the ball's weight times its distance, again the same product.
+For a pitch a level can measure (below 0.2 rad: 2 % of g) the data cannot tell it from a
+slightly larger frame and camera scale, so it is measured, not diagnosed.
 
 Why a torque offset and not direction-dependent friction: at any speed above the Coulomb
 term's smoothing velocity (1e-3 rad/s) the two are the same regressor (a constant that flips
@@ -174,15 +181,6 @@ def _contour_apply(base: RigParams, v: np.ndarray) -> tuple[RigParams, SensorCor
                            "frame.contour.b": float(v[1])}), _NONE
 
 
-def _mis_start(base: RigParams) -> tuple[float]:
-    return (1.0 - math.cos(base.environment.axis_misalignment),)
-
-
-def _mis_apply(base: RigParams, v: np.ndarray) -> tuple[RigParams, SensorCorrection]:
-    s = min(max(float(v[0]), 0.0), 0.99)
-    return base.replace(**{"environment.axis_misalignment": math.acos(1.0 - s)}), _NONE
-
-
 def _imbalance_start(base: RigParams) -> tuple[float, float]:
     return base.frame.imbalance_moment
 
@@ -222,8 +220,6 @@ def _make() -> dict[str, Effect]:
     g, p = _scalar("actuator.torque_gain")
     eff.append(Effect("torque_gain", "motor torque per commanded torque k_u",
                       ("k_u",), ("-",), (2e-3,), (0.2,), (5.0,), g, p, (1,)))
-    eff.append(Effect("axis_misalignment", "shaft pitched from horizontal: in-plane g cos(eps)",
-                      ("eps",), ("rad",), (1e-3,), (0.0,), (0.6,), _mis_start, _mis_apply))
     g, p = _scalar("track.rolling_resistance")
     eff.append(Effect("rolling_resistance", "rolling resistance of the ball on the track",
                       ("mu_rol",), ("-",), (1e-3,), (0.0,), (0.3,), g, p, (2,)))
@@ -267,7 +263,6 @@ DESTINATION: dict[str, str] = {
     "frame_imbalance": "rig.yaml frame.imbalance, frame.imbalance_angle",
     "frame_inertia": "rig.yaml frame.inertia",
     "torque_gain": "rig.yaml actuator.torque_gain",
-    "axis_misalignment": "rig.yaml environment.axis_misalignment",
     "rolling_resistance": "rig.yaml track.rolling_resistance",
     "track_bumps": "rig.yaml track.bump_phi/height/width",
     "ball_mass": "rig.yaml ball.mass (ball.inertia with it)",
@@ -282,7 +277,7 @@ DESTINATION: dict[str, str] = {
 MIN_SIZE: dict[str, float] = {
     "joint_coulomb_friction": 2e-5, "joint_viscous_friction": 2e-6, "torque_offset": 2e-5,
     "frame_imbalance": 1e-5, "frame_inertia": 2e-3, "torque_gain": 2e-3,
-    "axis_misalignment": 0.02, "rolling_resistance": 2e-4, "track_bumps": 2e-5,
+    "rolling_resistance": 2e-4, "track_bumps": 2e-5,
     "ball_mass": 2e-3, "ball_inertia": 2e-3, "plate_distance": 2e-5,
     "frame_contour": 2e-5, "frame_shape": 2e-5,
 }
@@ -329,8 +324,7 @@ def plausibility(name: str, values: np.ndarray, base: RigParams) -> str | None:
                     "well, the fit most likely stands in for something outside the library)")
         return None
     absmax = {"joint_coulomb_friction": (0.02, "N m"), "joint_viscous_friction": (2e-3,
-              "N m s/rad"), "rolling_resistance": (0.05, "-"), "torque_offset": (0.01, "N m"),
-              "axis_misalignment": (0.2, "rad")}
+              "N m s/rad"), "rolling_resistance": (0.05, "-"), "torque_offset": (0.01, "N m")}
     if name in absmax:
         lim, unit = absmax[name]
         return None if abs(v[0]) <= lim else f"{v[0]:.3g} {unit} beyond {lim:g} {unit}"
@@ -366,10 +360,8 @@ def _plausible_geometry(name: str, v: np.ndarray, base: RigParams) -> str | None
 
 
 def display_values(effect: Effect, values: np.ndarray) -> np.ndarray:
-    """Natural reported values: axis_misalignment's internal 1 - cos(eps) becomes eps."""
+    """Natural reported values: a bump's position wrapped to [0, 2 pi)."""
     v = np.asarray(values, float).copy()
-    if effect.name == "axis_misalignment":
-        v[0] = math.acos(1.0 - min(max(v[0], 0.0), 0.99))
     if effect.name == "track_bumps":
         v[0] = float(np.mod(v[0], 2.0 * np.pi))
     return v

@@ -62,6 +62,7 @@ from bfr_diagnose.effects import (
     apply_effects,
     display_values,
     effect_size,
+    plausibility,
     sensor_correction,
     sensor_param,
 )
@@ -775,7 +776,10 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
         sig = [r for r in rows if r["significant"]]
         if not sig:
             break
-        best = sig[0]
+        # a plausible explanation before a suspect (a fit outside its plausibility range
+        # stands in for something else; a plausible one that is significant is preferred)
+        plausible = [r for r in sig if r["plausible"]]
+        best = (plausible or sig)[0]
         best["selected"] = True
         _note_confounds(prob, confounded, st, rows, best, fits[best["effect"]],
                         crit.confound_corr)
@@ -915,7 +919,9 @@ def _assess(prob: Problem, st: _Stage, name: str, screened: tuple, full: bool,
         vals = display_values(eff, vals0)
         size = effect_size(name, vals0, prob.base)
     big = size >= MIN_SIZE.get(name, 0.0)
+    why = plausibility(name, vals, prob.base)
     row = {"effect": name, "stage": st.index + 1, "heldout_gain": gain, "dbic": dbic,
+           "plausible": why is None, "implausible_because": why,
            "threshold": thr,
            "significant": bool(full and gain > thr and dbic < crit.dbic_min
                                and degenerate is None and big),
@@ -1107,9 +1113,6 @@ def parameter_table(fit: Fit, tau: float) -> list[dict[str, Any]]:
         for j, pname in enumerate(eff.names):
             var = float(fit.cov[i + j, i + j]) * tau if fit.cov is not None else float("nan")
             sd = math.sqrt(var) if var >= 0 else float("nan")
-            if name == "axis_misalignment":
-                eps = disp[0]
-                sd = sd / max(math.sin(eps), 1e-6) if eps > 0 else math.sqrt(2 * max(sd, 0))
             out.append({"effect": name, "name": pname, "unit": eff.units[j],
                         "value": float(disp[j]), "ci95": [float(disp[j] - 1.96 * sd),
                                                           float(disp[j] + 1.96 * sd)],
