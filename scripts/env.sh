@@ -48,6 +48,11 @@ export ROS_DISTRO=jazzy
 export ROS_VERSION=2
 export ROS_PYTHON_VERSION=3
 export RMW_IMPLEMENTATION="${RMW_IMPLEMENTATION:-rmw_fastrtps_cpp}"
+# Discovery stays on this machine (ROS 2 Jazzy: LOCALHOST, SUBNET, OFF, SYSTEM_DEFAULT): a
+# shared network never sees these nodes and they never see another lab's. To reach a real
+# rig's drivers on another computer, set it before sourcing this file:
+#     ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET . scripts/env.sh
+export ROS_AUTOMATIC_DISCOVERY_RANGE="${ROS_AUTOMATIC_DISCOVERY_RANGE:-LOCALHOST}"
 export ROS_LOG_DIR="${ROS_LOG_DIR:-${BFR_ROOT}/log/ros}"
 _bfr_prepend AMENT_PREFIX_PATH "$BFR_VENV"
 _bfr_prepend CMAKE_PREFIX_PATH "$BFR_VENV"

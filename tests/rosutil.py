@@ -22,8 +22,6 @@ Typical use in a test (fixtures from tests/conftest.py)::
 
 from __future__ import annotations
 
-import atexit
-import fcntl
 import importlib
 import os
 import signal
@@ -33,54 +31,14 @@ import tempfile
 import time
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
+
+from bfr_ros.domain import claim_domain_id
 
 #: Root of the work tree (the folder holding src/, tests/, scripts/).
 WORKSPACE = Path(__file__).resolve().parents[1]
 #: colcon install base.
 INSTALL = WORKSPACE / "install"
-
-_DOMAIN_LOCK: IO[str] | None = None
-_DOMAIN_ID: int | None = None
-# Domain ids usable with Fast DDS' default ports on Linux: 0..101 (0 is everyone's default).
-_DOMAIN_RANGE = range(1, 102)
-
-
-def claim_domain_id() -> int:
-    """Claim a ROS domain id that no other process on this machine has claimed.
-
-    The claim is an exclusive ``flock`` on ``<tmp>/bfr-ros-domain-<id>.lock`` held for the
-    rest of the process's life; the search starts at a pid-dependent id.
-
-    Returns
-    -------
-    int
-        The domain id, the same on every call in one process.
-
-    Raises
-    ------
-    RuntimeError
-        If every id in 1..101 is taken.
-    """
-    global _DOMAIN_LOCK, _DOMAIN_ID
-    if _DOMAIN_ID is not None:
-        return _DOMAIN_ID
-    n = len(_DOMAIN_RANGE)
-    start = os.getpid() % n
-    for k in range(n):
-        domain = _DOMAIN_RANGE[(start + k) % n]
-        path = Path(tempfile.gettempdir()) / f"bfr-ros-domain-{domain}.lock"
-        handle = path.open("a")
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        _DOMAIN_LOCK, _DOMAIN_ID = handle, domain
-        atexit.register(handle.close)
-        return domain
-    raise RuntimeError("no free ROS_DOMAIN_ID in 1..101 on this machine")
-
 
 def isolate_ros_environment() -> int:
     """Give this process (and the subprocesses it starts) a private ROS 2 graph.

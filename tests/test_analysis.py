@@ -13,6 +13,7 @@ from bfr_model.perturbations import load_study
 from bfr_model.simulate import simulate
 from bfr_tools.analysis.bounce import bounce_along, classify, impact_energy, impact_momentum
 from bfr_tools.analysis.cli import main
+from bfr_tools.analysis.edges import EdgeCase, case_params, kinematic_lift
 from bfr_tools.analysis.energy import energy_analysis, rigid_forces
 from bfr_tools.analysis.trajectory import Trajectory
 
@@ -136,3 +137,53 @@ def test_cli_energy_json_and_rough(tmp_path, capsys) -> None:  # noqa: ANN001
     f = tmp_path / "rough.yaml"
     assert main(["rough", "--count", "12", "--seed", "3", "--out", str(f)]) == 0
     assert len(load_params(f).track.asperity_phi) == 12
+
+
+# -- bumps on both edges (seed recommendation 3) -------------------------------------------
+def test_kinematic_lift_adds_in_phase_and_cancels_interleaved() -> None:
+    """Rigid edges: bumps on one edge lift the centre by half their height, in phase by all
+    of it (the one-edge model's row); a dense row shifted by half a spacing fills the other
+    edge's valleys (a quarter of the ripple); isolated bumps in phase rise the full height."""
+    cfg = STUDY.two_edge
+    dense = {ph: kinematic_lift(P, cfg, EdgeCase("", "phase", 1e-3, 5e-4, ph))
+             for ph in (None, 0.0, 0.5)}
+    assert dense[0.0]["mean_lift"] == pytest.approx(5e-4, rel=0.02)
+    assert dense[None]["mean_lift"] == pytest.approx(0.5 * dense[0.0]["mean_lift"], rel=0.01)
+    assert dense[None]["ripple"] == pytest.approx(0.5 * dense[0.0]["ripple"], rel=0.05)
+    assert dense[0.5]["ripple"] < 0.3 * dense[0.0]["ripple"]
+    # the ball rides on the tops: the ripple is the sag of a chord over one spacing
+    assert dense[0.0]["ripple"] == pytest.approx(1e-3**2 / (8 * R), rel=0.2)
+    # the arcs over the tops have radius R: contact is lost above sqrt(g R) in phase
+    assert dense[0.0]["critical_speed"] == pytest.approx(math.sqrt(9.81 * R), rel=0.05)
+    sparse = kinematic_lift(P, cfg, EdgeCase("", "spacing", 8e-3, 1e-4, 0.0))
+    assert sparse["ripple"] == pytest.approx(1e-4, rel=0.02)  # down to the track between
+
+
+def test_case_rows_sit_on_their_edges() -> None:
+    cfg = STUDY.two_edge
+    case = EdgeCase("", "phase", 2e-3, 3e-4, 0.5)
+    p = case_params(P, cfg, 0.8, case)
+    edges = np.array(p.track.asperity_edge)
+    phi = np.array(p.track.asperity_phi)
+    n = edges.size // 2
+    assert set(edges[:n]) == {1} and set(edges[n:]) == {2}
+    front, back = np.sort(phi[:n]), np.sort(phi[n:])
+    spacing_rad = front[1] - front[0]
+    assert back[0] - front[0] == pytest.approx(0.5 * spacing_rad, rel=0.05)
+    assert case_params(P, cfg, 0.8, EdgeCase("", "phase", 2e-3, 3e-4, None)
+                       ).track.asperity_edges() == (1,) * n
+
+
+def test_cli_edges_quick(tmp_path, capsys) -> None:  # noqa: ANN001
+    """In phase the two edges are identical: the ball never moves sideways; over the front
+    row alone it does."""
+    study = tmp_path / "study.yaml"
+    study.write_text("run:\n  settle: 0.3\ntwo_edge:\n  location: 0.9\n")
+    assert main(["edges", "--quick", "--duration", "1.2", "--study", str(study), "--json",
+                 "--no-plots"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    runs = {(r["sweep"], r["phase"]): r for r in out["runs"]}
+    assert set(runs) == {("none", None), ("phase", None), ("phase", 0.0), ("phase", 0.5)}
+    assert runs[("phase", 0.0)]["max_abs_z"] == 0.0
+    assert runs[("phase", None)]["max_abs_z"] > 1e-5
+    assert all(math.isfinite(r["slip_per_turn"]) for r in out["runs"])

@@ -25,7 +25,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 SRC = ROOT / "src"
 ROS_MODULES = ("rclpy", "rcl_interfaces", "sensor_msgs", "std_msgs", "std_srvs",
-               "rosgraph_msgs", "builtin_interfaces", "bfr_interfaces", "launch", "launch_ros")
+               "rosgraph_msgs", "builtin_interfaces", "bfr_interfaces", "launch", "launch_ros",
+               "visualization_msgs", "geometry_msgs")
 #: Packages whose non-node modules must not import ROS (pure numpy cores).
 PURE_CORES = ("bfr_model", "bfr_camera", "bfr_control", "bfr_sim", "bfr_diagnose")
 

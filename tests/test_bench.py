@@ -54,7 +54,7 @@ def test_quick_json_reports_every_figure_with_budget_and_met(quick_result: dict)
     # the issue's budgets of these sections are all present
     assert by_key["sim.rigid_rtf_chunked"]["budget"]["value"] == 50.0
     assert by_key["sim.rigid_rtf_node"]["budget"]["value"] == 50.0
-    assert by_key["sim.contact_rtf_bumps"]["budget"]["value"] == 1.0
+    assert by_key["sim.contact_rtf_bumps"]["budget"]["value"] == 2.0
     assert by_key["camera.detect_ms_roi"]["budget"] == {
         "op": "<", "value": 1.0, "text": "< 1 ms", "source": "issue 9"}
     # the rigid model and the camera always measure (the contact model may lack a row visit)

@@ -97,12 +97,18 @@ def test_camera_node_tracks_rendered_ball(ros_harness: rosutil.RosHarness,
             break
     else:
         pytest.fail(f"the camera node never answered a frame:\n{cam.output()[-2000:]}")
+    # no camera_info yet: the node measures nothing (no fix with a calibration it does not
+    # have), it says why
+    first = rig.all_obs[-1]
+    assert (first.status, first.valid) == (BallObservation.INVALID_INPUT, False)
+    assert "waiting for camera_info on /camera/camera_info" in cam.output()
     h.spin_for(0.2)
     info = CameraInfo()
     for k, v in rig.cam.to_camera_info().items():
         if k != "frame_id":
             setattr(info, k, v)
     rig.info_pub.publish(info)
+    assert h.spin_until(lambda: "calibration: camera_info from" in cam.output(), timeout=10)
     errors, dphi = [], []
     t0 = 1 * NS
     for k in range(40):
@@ -124,7 +130,8 @@ def test_camera_node_tracks_rendered_ball(ros_harness: rosutil.RosHarness,
     assert np.median(errors) < 2e-4 and max(errors) < 5e-4  # [m]
     assert np.max(np.abs(dphi)) < 5e-3  # [rad]
     out = cam.output()
-    assert "calibration from camera_info" in out and "ball found" in out
+    assert "calibration: camera_info from /camera/camera_info (640x480" in out
+    assert "ball found" in out
 
     # -- bad input: each gives an observation (never a crash), with a clear log line ----------
     img, _ = rig.render(0.0, 0.3)
@@ -168,8 +175,9 @@ def test_camera_node_tracks_rendered_ball(ros_harness: rosutil.RosHarness,
                  "image data has 1000 B",
                  "theta must be finite",
                  "no ball position: NOT_FOUND",
-                 "phi not computed (newest joint_states sample is",
+                 "phi not computed (newest /joint_states sample is",
                  "no camera image for",
+                 "on /camera/image_raw",
                  "camera images are arriving again"):
         assert text in out, text
     assert cam.stop() == 0  # SIGINT: a clean exit with the counts

@@ -51,7 +51,8 @@ def test_node_defaults_mirror_the_yaml_files() -> None:
     assert d["sim"]["mode"] == "realtime"  # simulator_node.yaml
     assert "detector" not in d  # the simulator renders; it does not detect
     c = camera_defaults()
-    assert c["ball"] == {"radius": pytest.approx(16.6e-3)}
+    assert c["ball"]["radius"] == pytest.approx(16.6e-3)  # rig.yaml: the ball and the contour
+    assert c["frame"]["contour"]["a"] == pytest.approx(0.1095)
     assert "detector" in c and c["input"]["joint_name"] == "frame_joint"
 
 

@@ -7,10 +7,13 @@ of simulated time, and the bag must hold the contract's topics at the contract's
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
+import numpy as np
 import pytest
-from bfr_model.io.bag import read_bag
+from bfr_model.io.bag import make_typestore, read_bag, read_bag_messages
+from bfr_model.params import load_params
 from bfr_tools.rig import _parser, format_summary, run_rig
 
 DURATION = 32.0
@@ -53,6 +56,9 @@ def test_bag_holds_the_contract_topics_at_their_rates(run: tuple[dict, Path]) ->
         "/controller_state": ("bfr_interfaces/msg/ControllerState", 200.0),
         "/sim_truth": ("bfr_interfaces/msg/SimTruth", 200.0),
         "/camera/camera_info": ("sensor_msgs/msg/CameraInfo", 200.0),
+        "/sim_markers": ("visualization_msgs/msg/MarkerArray", 30.0),  # markers.rate
+        "/ball_markers": ("visualization_msgs/msg/MarkerArray", 30.0),
+        "/camera/detection": ("visualization_msgs/msg/ImageMarker", 30.0),
     }
     assert set(s["topics"]) == set(expected)
     for topic, (msgtype, rate) in expected.items():
@@ -71,6 +77,66 @@ def test_bag_holds_the_contract_topics_at_their_rates(run: tuple[dict, Path]) ->
     with Reader(bag) as reader:
         assert {c.topic for c in reader.connections} == set(expected)
         assert reader.message_count == sum(d["count"] for d in s["topics"].values())
+
+
+def test_bag_shows_the_rig_in_the_world_frame(run: tuple[dict, Path]) -> None:
+    # the markers a Foxglove/RViz user sees: the simulator's ball where the truth has it, the
+    # camera's fix next to it, the frame's contour at the encoder's angle
+    _, bag = run
+    store = make_typestore()
+    by_topic: dict[str, list] = {}
+    for m in read_bag_messages(bag).messages:
+        by_topic.setdefault(m.topic, []).append(store.deserialize_cdr(m.data, m.msgtype))
+
+    def ns(m) -> int:  # noqa: ANN001
+        return m.header.stamp.sec * 1_000_000_000 + m.header.stamp.nanosec
+
+    truth = sorted(by_topic["/sim_truth"], key=ns)
+    tt = np.array([ns(m) for m in truth], dtype=float)
+    tx, ty = np.array([m.ball_x for m in truth]), np.array([m.ball_y for m in truth])
+    js = sorted(by_topic["/joint_states"], key=ns)
+    jt, jth = np.array([ns(m) for m in js], dtype=float), np.array([m.position[0] for m in js])
+    p = load_params()
+    exact, near, contour_err = 0, [], []
+    for arr in by_topic["/sim_markers"]:
+        parts = {(m.ns, m.id): m for m in arr.markers}
+        assert {m.header.frame_id for m in arr.markers} == {"world"}
+        ball = parts["ball", 0]
+        assert ball.scale.x == pytest.approx(2 * p.ball.radius)
+        t, x, y = ns(ball), ball.pose.position.x, ball.pose.position.y
+        i = np.searchsorted(tt, t)
+        if i < tt.size and tt[i] == t:  # the truth has this instant: the very same position
+            assert (x, y) == pytest.approx((tx[i], ty[i]), abs=1e-9)
+            exact += 1
+        elif 0 < i < tt.size:  # between two truth samples (5 ms apart): on the line between
+            near.append(math.hypot(x - np.interp(t, tt, tx), y - np.interp(t, tt, ty)))
+        # the front plate's contour is the frame at theta: its first vertex (phi = 0, the
+        # waist a - b on the frame's +y axis) turned by the pose's orientation, which is the
+        # encoder's theta at that instant
+        th = np.interp(t, jt, jth)
+        front = parts["frame", 0]
+        q = front.pose.orientation
+        yaw = 2.0 * math.atan2(q.z, q.w)
+        v0 = front.points[0]
+        r = p.frame.contour.a - p.frame.contour.b
+        assert (v0.x, v0.y) == pytest.approx((0.0, r), abs=1e-12)
+        wx, wy = v0.x * math.cos(yaw) - v0.y * math.sin(yaw), v0.x * math.sin(yaw) + v0.y * \
+            math.cos(yaw)
+        contour_err.append(math.hypot(wx + r * math.sin(th), wy - r * math.cos(th)))
+        assert v0.z == pytest.approx(0.5 * p.ball.plate_distance)
+    n = len(by_topic["/sim_markers"])
+    assert exact >= 0.2 * n and len(near) >= 0.5 * n, (exact, len(near), n)
+    assert max(near) < 5e-4  # [m]: 5 ms of a 0.3 m/s ball, linearly interpolated
+    assert max(contour_err) < 1e-4  # [m]: theta interpolated between 2 ms samples
+    # the camera's fix, in the world frame, where the ball is (the detector's accuracy)
+    fixes = [m.markers[0] for m in by_topic["/ball_markers"] if m.markers[0].action == 0]
+    assert len(fixes) >= 0.99 * len(by_topic["/ball_markers"])
+    err = [math.hypot(f.pose.position.x - np.interp(ns(f), tt, tx),
+                      f.pose.position.y - np.interp(ns(f), tt, ty)) for f in fixes]
+    assert all(f.header.frame_id == "world" for f in fixes)
+    assert float(np.median(err)) < 3e-4
+    circles = by_topic["/camera/detection"]
+    assert all(c.header.frame_id == "camera_optical_frame" and c.scale > 5 for c in circles)
 
 
 def test_rig_names_a_node_that_dies_early(tmp_path: Path,

@@ -19,7 +19,7 @@ setup(
         ("share/ament_index/resource_index/packages", ["resource/" + package_name]),
         ("share/" + package_name, ["package.xml"]),
         ("share/" + package_name + "/config",
-         sorted(glob("config/*.yaml") + glob("config/*.json"))),
+         sorted(glob("config/*.yaml") + glob("config/*.json") + glob("config/*.rviz"))),
         ("share/" + package_name + "/launch", sorted(glob("launch/*.py") + glob("launch/*.xml"))),
         # Keep lib/<package>/ present even before the package registers an executable.
         ("lib/" + package_name, []),

@@ -2,22 +2,38 @@
 
 A thin node over :class:`bfr_camera.detector.BallDetector`:
 
-- subscribes ``camera/image_raw`` (``sensor_msgs/Image``; mono8, mono16, 32FC1 or colour;
-  sensor-data QoS), ``camera/camera_info`` (the intrinsics, which replace those of
-  ``camera.*`` when ``input.use_camera_info``) and ``joint_states`` (the frame angle theta,
-  interpolated at each frame's exposure mid-time from a short buffer, for the observation's
-  ``phi = theta + atan2(x, y)``);
+- subscribes ``camera/image_raw`` (``sensor_msgs/Image``; mono8, mono16, 32FC1 or colour),
+  ``camera/camera_info`` (the intrinsics: size, K, D, distortion model) and
+  ``joint_states`` (the frame angle theta, interpolated at each frame's exposure mid-time
+  from a short buffer, for the observation's ``phi = theta + atan2(x, y)``); images and
+  camera_info with sensor-data QoS keeping the newest message only (best effort, keep last
+  1: after a stall the node measures the present image, it never works through a backlog);
 - publishes one ``ball_observation`` (``bfr_interfaces/BallObservation``, reliable) per
-  image, stamped with the image's stamp (the exposure mid-time). The detector keeps the last
-  fix and searches a region of interest around it first.
+  image it measures, stamped with the image's stamp (the exposure mid-time). The detector
+  keeps the last fix and searches a region of interest around it first;
+- at ``markers.rate`` Hz of the images' stamps (0: off, as in hardware.yaml), what it saw for
+  Foxglove and RViz: ``ball_markers`` (``visualization_msgs/MarkerArray``, frame ``world``: a
+  sphere of the ball's size at the fix, deleted when no ball is found) and
+  ``camera/detection`` (``visualization_msgs/ImageMarker``: a circle round the ball on the
+  image, in the image's frame and stamp).
+
+Calibration. With ``input.use_camera_info: true`` (the default) the node measures nothing
+until the first valid ``camera_info`` has arrived: an image before it gives an
+``INVALID_INPUT`` observation ("waiting for camera_info"), never a fix computed with
+another camera's intrinsics. With ``false`` it uses ``camera.*`` (k, d, size) from its
+parameters and ignores camera_info. It logs which calibration it uses, and again when a
+camera_info changes it. The camera's pose and timing (``camera.position``,
+``camera.orientation``, ``camera.exposure_time``) always come from the parameters
+(docs/hardware.md).
 
 Bad input never stops the node: an image it cannot use (encoding, size, step, a size that
 does not match the calibration, a non-finite theta) gives an observation with status
 ``INVALID_INPUT`` and a throttled warning that says why; no ball gives ``NOT_FOUND``;
-several give ``AMBIGUOUS``; no image for ``input.frame_timeout`` seconds (wall time) gives
-an ``INVALID_INPUT`` observation stamped now and a warning. When no current joint_states
-sample covers a frame, the ball's position is still reported (valid) with ``phi`` and
-``theta_used`` NaN.
+several give ``AMBIGUOUS``; no image for ``input.frame_timeout`` seconds of the node's clock
+(simulated time under ``use_sim_time``) gives an ``INVALID_INPUT`` observation stamped now
+and a warning. When no current joint_states sample covers a frame, the ball's position is
+still reported (valid) with ``phi`` and ``theta_used`` NaN. Log messages name the topics as
+resolved (remapping and namespace applied).
 """
 
 from __future__ import annotations
@@ -28,22 +44,31 @@ import time
 from collections import deque
 from typing import Any
 
+import numpy as np
+from bfr_model.dynamics import RigidModel
 from bfr_model.param_file import check, config_path
-from bfr_model.params import default_params_path
+from bfr_model.params import RigParams, default_params_path, params_from_dict
+from bfr_model.scene import fix_markers
+from bfr_ros.markers import MARKER_QOS, MarkerPublisher, image_circle
 from bfr_ros.node_common import (
-    IMAGE_QOS,
+    IMAGE_SUB_QOS,
     JOINT_STATES_QOS,
     STATE_QOS,
+    CdrError,
+    RawImage,
+    Throttle,
     declare_parameter_tree,
+    format_published,
     image_to_array,
     load_yaml_parameters,
+    ns_to_stamp,
+    parse_joint_state,
     read_parameter_tree,
     run_node,
-    stamp_to_ns,
 )
-from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import CameraInfo, Image, JointState
+from visualization_msgs.msg import ImageMarker
 
 from bfr_camera.calibration import (
     CameraModel,
@@ -59,12 +84,33 @@ __all__ = ["CameraNode", "ThetaBuffer", "main", "node_defaults"]
 _NS = 1_000_000_000
 
 
+#: Groups of rig.yaml the camera node reads: the ball's size and the frame's contour.
+RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
+
+
 def node_defaults() -> dict[str, Any]:
-    """Defaults: camera.yaml (camera.*, detector.*), ball.radius of rig.yaml, this node's file."""
+    """Defaults: camera.yaml (camera.*, detector.*), rig.yaml, this node's file."""
     d = dict(load_yaml_parameters(default_camera_path()))
-    d["ball"] = {"radius": float(load_yaml_parameters(default_params_path())["ball"]["radius"])}
+    d.update(load_yaml_parameters(default_params_path()))
     d.update(load_yaml_parameters(config_path("bfr_camera", "camera_node.yaml")))
     return d
+
+
+def ball_track(rig: RigParams) -> tuple[np.ndarray, np.ndarray]:
+    """The ball's track for the detector's track gate: angle [rad] and radius [m].
+
+    The ball centre's polar angle (clockwise from the frame's +y axis) and its distance from
+    the axis over one turn of the contour, increasing in angle.
+    """
+    phi = np.linspace(0.0, 2.0 * np.pi, 2048, endpoint=False)
+    x = np.zeros((phi.size, 4))
+    x[:, 1] = phi
+    pos = RigidModel(rig).ball_position(x)  # theta = 0: frame coordinates
+    psi = np.mod(np.arctan2(pos[:, 0], pos[:, 1]), 2.0 * np.pi)
+    order = np.argsort(psi)
+    psi, r = psi[order], np.hypot(pos[order, 0], pos[order, 1])
+    keep = np.concatenate([[True], np.diff(psi) > 0])
+    return psi[keep], r[keep]
 
 
 class ThetaBuffer:
@@ -132,47 +178,83 @@ class CameraNode(Node):
         what = "is unknown" if self.ball_radius == 0 else f"must be > 0 m, got {self.ball_radius}"
         check(math.isfinite(self.ball_radius) and self.ball_radius > 0, "ball.radius",
               f"{what}: pass --params-file <bfr_model>/config/rig.yaml or -p ball.radius:=<m>")
-        self.detector = BallDetector(self.camera, self.ball_radius, self.detector_config)
+        self.track = ball_track(params_from_dict({k: p[k] for k in RIG_GROUPS if k in p}))
+        self.detector = self._make_detector(self.camera)
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])
         self.joint_name = str(inp["joint_name"])
         self.theta = ThetaBuffer(float(inp["theta_max_gap"]))
         self.frame_timeout = float(inp["frame_timeout"])
+        check(self.frame_timeout > 0, "input.frame_timeout",
+              f"must be > 0 s, got {self.frame_timeout}")
         self.obs_pub = self.create_publisher(BallObservation, "ball_observation", STATE_QOS)
-        self.create_subscription(Image, "camera/image_raw", self._on_image, IMAGE_QOS)
-        self.create_subscription(CameraInfo, "camera/camera_info", self._on_info, IMAGE_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_joints, JOINT_STATES_QOS)
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(max(self.frame_timeout / 4.0, 0.05), self._watchdog, clock=self._steady)
-        self.last_image_wall = time.monotonic()
+        self.markers = MarkerPublisher(self, "ball_markers", float(p["markers"]["rate"]))
+        self.detection_pub = (self.create_publisher(ImageMarker, "camera/detection", MARKER_QOS)
+                              if self.markers.pub is not None else None)
+        # images and joint_states arrive serialized and are parsed here (RawImage,
+        # parse_joint_state): no Python message object per image or encoder sample
+        self.image_sub = self.create_subscription(Image, "camera/image_raw", self._on_image,
+                                                  IMAGE_SUB_QOS, raw=True)
+        self.info_sub = self.create_subscription(CameraInfo, "camera/camera_info",
+                                                 self._on_info, IMAGE_SUB_QOS)
+        self.js_sub = self.create_subscription(JointState, "joint_states", self._on_joints,
+                                               JOINT_STATES_QOS, raw=True)
+        self.throttle = Throttle()
+        # timeouts on the node's clock: simulated time under use_sim_time
+        self.create_timer(max(self.frame_timeout / 4.0, 0.05), self._watchdog)
+        self.started_ns = self.get_clock().now().nanoseconds
+        self.last_image_ns = self.started_ns
+        self.calibrated = not self.use_camera_info
+        self.waiting_logged = False
         self.missing = False
         self.last_status: int | None = None
         self.last_reason = ""
         self.last_theta_problem = ""
         self.info_key: tuple | None = None
         self.stats = {"frames": 0, "found": 0, "not_found": 0, "ambiguous": 0, "invalid": 0,
-                      "missing": 0, "time": 0.0}
+                      "missing": 0, "uncalibrated": 0, "published": 0, "time": 0.0}
         self.executor_ref: Any = None
+        if self.use_camera_info:
+            calib = (f"calibration: waiting for camera_info on {self.info_sub.topic_name} "
+                     f"(no image is measured before it)")
+        else:
+            calib = (f"calibration: parameters camera.* ({self._describe(self.camera)}; "
+                     f"input.use_camera_info false: {self.info_sub.topic_name} ignored)")
         self.get_logger().info(
-            f"camera: {self.camera.width}x{self.camera.height}, ball radius "
-            f"{1e3 * self.ball_radius:.1f} mm ({self.detector.expected_radius_px:.1f} px), "
-            f"ROI {'on' if self.detector_config.use_roi else 'off'}, camera_info "
-            f"{'used' if self.use_camera_info else 'ignored'}")
+            f"camera: images {self.image_sub.topic_name}, ball radius "
+            f"{1e3 * self.ball_radius:.1f} mm, ROI "
+            f"{'on' if self.detector_config.use_roi else 'off'}, pose "
+            f"{[round(v, 4) for v in self.camera_params['position']]} m; {calib}")
+
+    def _make_detector(self, cam: CameraModel) -> BallDetector:
+        det = BallDetector(cam, self.ball_radius, self.detector_config)
+        det.set_track(*self.track)
+        return det
+
+    @staticmethod
+    def _describe(cam: CameraModel) -> str:
+        return (f"{cam.width}x{cam.height}, fx {cam.fx:.1f} fy {cam.fy:.1f} px, "
+                f"{cam.distortion_model} d {[round(float(v), 4) for v in cam.d]}")
 
     # -- inputs ----------------------------------------------------------------------------
-    def _on_joints(self, msg: JointState) -> None:
-        names = list(msg.name)
+    def _on_joints(self, raw: bytes) -> None:
+        try:
+            t_ns, names, position, velocity, _ = parse_joint_state(raw)
+        except CdrError as exc:
+            if self.throttle("js", 2.0):
+                self.get_logger().warn(f"malformed message on {self.js_sub.topic_name}: {exc}")
+            return
         if self.joint_name in names:
             j = names.index(self.joint_name)
-        elif not names and len(msg.position) == 1:
+        elif not names and len(position) == 1:
             j = 0
         else:
             return  # another joint's message
-        if j >= len(msg.position):
+        if j >= len(position):
             return
-        theta = float(msg.position[j])
-        theta_dot = float(msg.velocity[j]) if j < len(msg.velocity) else 0.0
-        self.theta.add(stamp_to_ns(msg.header.stamp), theta, theta_dot)
+        theta = float(position[j])
+        theta_dot = float(velocity[j]) if j < len(velocity) else 0.0
+        self.theta.add(t_ns, theta, theta_dot)
 
     def _on_info(self, msg: CameraInfo) -> None:
         if not self.use_camera_info:
@@ -186,31 +268,47 @@ class CameraNode(Node):
         try:
             cam = CameraModel.from_camera_info(msg, **{k: (tuple(v) if isinstance(v, list)
                                                            else v) for k, v in pose.items()})
-            det = BallDetector(cam, self.ball_radius, self.detector_config)
+            det = self._make_detector(cam)
         except (CameraModelError, ValueError) as exc:
             self.get_logger().error(f"camera_info rejected, keeping the previous calibration: "
                                     f"{exc}")
             return
+        first = not self.calibrated
         self.camera, self.detector = cam, det
-        self.get_logger().info(f"calibration from camera_info: {cam.width}x{cam.height}, "
-                               f"fx {cam.fx:.1f} fy {cam.fy:.1f} px, {cam.distortion_model}")
+        self.calibrated = True
+        self.get_logger().info(
+            f"calibration{' changed' if not first else ''}: camera_info from "
+            f"{self.info_sub.topic_name} ({self._describe(cam)}); pose from the parameters")
 
-    def _on_image(self, msg: Image) -> None:
+    def _on_image(self, raw: bytes) -> None:
         t0 = time.perf_counter()
-        self.last_image_wall = time.monotonic()
+        self.last_image_ns = self.get_clock().now().nanoseconds
         if self.missing:
             self.missing = False
-            self.get_logger().info("camera images are arriving again")
+            self.get_logger().info(f"camera images are arriving again on "
+                                   f"{self.image_sub.topic_name}")
         out = BallObservation()
-        out.header.stamp = msg.header.stamp
         out.header.frame_id = "world"
+        try:
+            msg = RawImage(raw)
+        except CdrError as exc:
+            out.header.stamp = self.get_clock().now().to_msg()
+            self._invalid(out, f"malformed image message: {exc}", t0)
+            return
+        ns_to_stamp(msg.stamp_ns, out.header.stamp)
+        if not self.calibrated:
+            self.stats["uncalibrated"] += 1
+            self._invalid(out, f"waiting for camera_info on {self.info_sub.topic_name}: "
+                               f"no calibration yet, frame not measured", t0)
+            return
         arr, err = image_to_array(msg)
         if arr is None:
             self._invalid(out, err, t0)
             return
-        t_ns = stamp_to_ns(msg.header.stamp)
+        t_ns = msg.stamp_ns
         theta, why = self.theta.theta_at(t_ns)
-        det = self.detector.detect(arr, 0.0 if theta is None else theta)
+        det = self.detector.detect(arr, 0.0 if theta is None else theta,
+                                   gate=theta is not None)
         self.stats["frames"] += 1
         status = int(det.status)
         if det.status == DetectionStatus.INVALID_INPUT:
@@ -225,17 +323,18 @@ class CameraNode(Node):
             out.phi = out.theta_used = math.nan
             if det.valid:
                 kind = why.split(" s ")[0].rstrip("0123456789.")  # without the figures
-                if kind != self.last_theta_problem:
-                    self.get_logger().warn(f"phi not computed ({why}); x, y are still valid")
-                else:
-                    self.get_logger().warn(f"phi not computed ({why}); x, y are still valid",
-                                           throttle_duration_sec=2.0)
+                text = (f"phi not computed ({why.replace('joint_states', self.js_sub.topic_name)}"
+                        f"); x, y are still valid")
+                if kind != self.last_theta_problem or self.throttle("theta", 2.0):
+                    self.get_logger().warn(text)
                 self.last_theta_problem = kind
         else:
             self.last_theta_problem = ""
             out.phi, out.theta_used = float(det.phi), float(det.theta_used)
         out.processing_time = time.perf_counter() - t0
         self.obs_pub.publish(out)
+        self.stats["published"] += 1
+        self._publish_markers(out, msg)
         self.stats["time"] += out.processing_time
         self.last_reason = ""
         key = {0: "found", 1: "not_found", 2: "ambiguous"}.get(status, "invalid")
@@ -244,9 +343,20 @@ class CameraNode(Node):
             if det.valid:
                 self.get_logger().info(f"ball found at ({det.x:+.4f}, {det.y:+.4f}) m")
             else:
-                self.get_logger().warn(f"no ball position: {det.status.name} ({det.reason})",
-                                       throttle_duration_sec=1.0)
+                if self.throttle("no_ball", 1.0):
+                    self.get_logger().warn(f"no ball position: {det.status.name} "
+                                           f"({det.reason})")
         self.last_status = status
+
+    def _publish_markers(self, out: BallObservation, img: RawImage) -> None:
+        """The fix as markers (``markers.rate`` Hz of the image stamps; module docstring)."""
+        if not self.markers.due(img.stamp_ns):
+            return
+        self.markers.publish(fix_markers(out.x, out.y, out.valid, self.ball_radius),
+                             img.stamp_ns)
+        if self.detection_pub is not None:
+            self.detection_pub.publish(image_circle(out.u, out.v, out.radius_px, out.header.stamp,
+                                                    img.frame_id, out.valid))
 
     def _invalid(self, out: BallObservation, reason: str, t0: float,
                  counted: bool = False) -> None:
@@ -259,32 +369,38 @@ class CameraNode(Node):
         out.u = out.v = out.radius_px = out.x = out.y = out.phi = out.theta_used = math.nan
         out.processing_time = time.perf_counter() - t0
         self.obs_pub.publish(out)
+        self.stats["published"] += 1
         self.last_status = BallObservation.INVALID_INPUT
         # a new reason is logged at once, a repeated one at most once a second
         if reason.split(" (", maxsplit=1)[0] != self.last_reason:
             self.get_logger().warn(f"unusable camera frame: {reason}")
-        else:
-            self.get_logger().warn(f"unusable camera frame: {reason}", throttle_duration_sec=1.0)
+        elif self.throttle("unusable", 1.0):
+            self.get_logger().warn(f"unusable camera frame: {reason}")
         self.last_reason = reason.split(" (", maxsplit=1)[0]
 
     def _watchdog(self) -> None:
-        gap = time.monotonic() - self.last_image_wall
+        now = self.get_clock().now().nanoseconds
+        if now < self.last_image_ns:  # the clock went back (a simulation restarted)
+            self.last_image_ns = now
+        gap = (now - self.last_image_ns) / _NS
         if gap < self.frame_timeout:
             return
         if self.stats["frames"] == 0:  # not armed before the first image
             if gap > 5.0:
-                self.get_logger().warn("no camera image received yet (camera/image_raw)",
+                self.get_logger().warn(f"no camera image received yet on "
+                                       f"{self.image_sub.topic_name}",
                                        throttle_duration_sec=10.0)
             return
         if not self.missing:
-            self.get_logger().warn(f"no camera image for {gap:.1f} s (camera/image_raw)")
+            self.get_logger().warn(f"no camera image for {gap:.1f} s on "
+                                   f"{self.image_sub.topic_name}")
         self.missing = True
         out = BallObservation()
         out.header.stamp = self.get_clock().now().to_msg()
         out.header.frame_id = "world"
         self.stats["missing"] += 1
         self._invalid(out, f"no image for {gap:.1f} s", time.perf_counter(), counted=True)
-        self.last_image_wall = time.monotonic()
+        self.last_image_ns = now
 
     def on_shutdown(self) -> None:
         """Log the counts."""
@@ -293,8 +409,9 @@ class CameraNode(Node):
         self.get_logger().info(
             f"camera: {s['frames']} frames, {s['found']} found, {s['not_found']} not found, "
             f"{s['ambiguous']} ambiguous, {s['invalid']} invalid ({s['missing']} for missing "
-            f"images); mean processing "
+            f"images, {s['uncalibrated']} before camera_info); mean processing "
             f"{1e3 * s['time'] / n:.2f} ms")
+        self.get_logger().info(format_published({self.obs_pub.topic_name: s["published"]}))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -70,6 +70,7 @@ from typing import Any
 
 import cv2
 import numpy as np
+from bfr_model.jit import njit
 from bfr_model.param_file import finite, integer, nonnegative, one_of, positive
 from numpy.typing import ArrayLike, NDArray
 
@@ -227,6 +228,11 @@ class DetectorConfig:
         Minimum confidence of a FOUND result [-].
     ball_plane_z : float
         World z of the plane the ball centre moves in [m] (0: the frame's plane).
+    track_gate : float
+        Track gate [m]: when the detector knows the track (:meth:`BallDetector.set_track`)
+        and the frame angle, a ball-like object whose centre lies further than this from
+        the ball's track (radially) is not the ball (a hole, the hub, a bolt head of the
+        frame); 0 turns the gate off.
     """
 
     polarity: str = "bright"
@@ -247,6 +253,7 @@ class DetectorConfig:
     radius_prior_sigma: float = 0.05
     min_confidence: float = 0.2
     ball_plane_z: float = 0.0
+    track_gate: float = 0.02
 
     def __post_init__(self) -> None:
         one_of("detector.polarity", self.polarity, ("bright", "dark"))
@@ -259,6 +266,7 @@ class DetectorConfig:
         integer("detector.n_rays", self.n_rays, minimum=16)
         integer("detector.max_candidates", self.max_candidates, minimum=1)
         finite("detector.ball_plane_z", self.ball_plane_z)
+        nonnegative("detector.track_gate", self.track_gate)
         # counts are used as such (array sizes): 64.0 passes the check and becomes 64
         object.__setattr__(self, "n_rays", int(self.n_rays))
         object.__setattr__(self, "max_candidates", int(self.max_candidates))
@@ -331,6 +339,136 @@ def _solve3(m: np.ndarray, b: np.ndarray) -> tuple[float, float, float] | None:
     return x, y, z
 
 
+@njit
+def _edge_kernel(prof, pad, half, start, cu, cv, cos, sin):  # noqa: ANN001, ANN202
+    """Compiled core of :meth:`BallDetector._edges` on the sampled profiles ``prof`` (n, m).
+
+    The same arithmetic as the array form it replaces, in loops over rays and samples, in
+    the same precision (float32 profiles, float64 positions): the steepest falling sample
+    (the first NaN, as ``np.argmax``, when the ray leaves the image), the ramp's extent
+    ``nl``, ``nr`` (samples either side with ``g >= g_max / 2``), the level windows, the
+    crossing of the mid level nearest the ramp's middle and its linear interpolation.
+    Returns the edge points (n, 2), contrasts, outside levels, whether a crossing was
+    found, and the ramp extents.
+    """
+    n, m = prof.shape
+    f32 = np.float32
+    pts = np.empty((n, 2))
+    contrast = np.empty(n, dtype=np.float32)
+    outer_l = np.empty(n, dtype=np.float32)
+    has = np.zeros(n, dtype=np.bool_)
+    nls = np.zeros(n, dtype=np.int64)
+    nrs = np.zeros(n, dtype=np.int64)
+    for r in range(n):
+        # steepest point: argmax of g[i] = prof[i] - prof[i + 2] over i in [pad-1, m-pad-1)
+        j = -1
+        gmax = f32(0.0)
+        for i in range(pad - 1, m - pad - 1):
+            gi = prof[r, i] - prof[r, i + 2]
+            if gi != gi:  # NaN: np.argmax returns the first one
+                j = i
+                break
+            if j < 0 or gi > gmax:
+                j = i
+                gmax = gi
+        j += 1  # sample index of the steepest point
+        g0 = prof[r, j - 1] - prof[r, j + 1]
+        h = f32(0.5) * g0
+        nl = 0
+        for q in range(1, half + 1):
+            gq = prof[r, j - 1 - q] - prof[r, j + 1 - q]
+            if not gq >= h:
+                break
+            nl += 1
+        nr = 0
+        for q in range(1, half + 1):
+            gq = prof[r, j - 1 + q] - prof[r, j + 1 + q]
+            if not gq >= h:
+                break
+            nr += 1
+        inner = f32(0.0)
+        outer = f32(0.0)
+        for q in range(5):
+            inner += prof[r, j - nl - 2 - q]
+            outer += prof[r, j + nr + 2 + q]
+        inner = inner * f32(0.2)
+        outer = outer * f32(0.2)
+        mid = f32(0.5) * (inner + outer)
+        jc = j + (nr - nl) // 2
+        best = -1
+        best_d = np.inf
+        for k in range(6):
+            if prof[r, jc - 3 + k] >= mid and not prof[r, jc - 2 + k] >= mid:
+                d = abs(k - 2.5)
+                if d < best_d:
+                    best_d = d
+                    best = k
+        kk = best if best >= 0 else 0
+        a = prof[r, jc - 3 + kk]
+        den = a - prof[r, jc - 2 + kk] if best >= 0 else f32(1.0)
+        frac = (a - mid) / den
+        se = np.float64(f32(start)) + 0.5 * (np.float64(jc + kk - 3) + np.float64(frac))
+        pts[r, 0] = cu + np.float64(cos[r]) * se
+        pts[r, 1] = cv + np.float64(sin[r]) * se
+        contrast[r] = inner - outer
+        outer_l[r] = outer
+        has[r] = best >= 0
+        nls[r] = nl
+        nrs[r] = nr
+    return pts, contrast, outer_l, has, nls, nrs
+
+
+
+@njit
+def _ransac_circle(x, t, r_lo, r_hi):  # noqa: ANN001, ANN202
+    """Inliers (within 1 px) of the best circumcircle of the triples ``t`` (see below).
+
+    Compiled (numba) form of the RANSAC step of :func:`_circle_fit`, the same arithmetic in
+    loops: for each triple the circumcircle of its points (skipped when the points are
+    collinear or its radius is outside ``(r_lo, r_hi)``), the number of points within 1 px
+    of it; the first circle with the most wins. Returns the inlier mask of the winner and
+    whether there was any circle at all.
+    """
+    n = x.shape[0]
+    best_count = -1
+    best_ux = 0.0
+    best_uy = 0.0
+    best_rr = 0.0
+    for i in range(t.shape[0]):
+        a0 = x[t[i, 0], 0]
+        a1 = x[t[i, 0], 1]
+        b0 = x[t[i, 1], 0]
+        b1 = x[t[i, 1], 1]
+        c0 = x[t[i, 2], 0]
+        c1 = x[t[i, 2], 1]
+        aa = -x[t[i, 0], 3]
+        bb = -x[t[i, 1], 3]
+        cc = -x[t[i, 2], 3]
+        d = 2.0 * (a0 * (b1 - c1) + b0 * (c1 - a1) + c0 * (a1 - b1))
+        if d == 0.0:
+            continue
+        ux = (aa * (b1 - c1) + bb * (c1 - a1) + cc * (a1 - b1)) / d
+        uy = (aa * (c0 - b0) + bb * (a0 - c0) + cc * (b0 - a0)) / d
+        rr = np.hypot(a0 - ux, a1 - uy)
+        if not (np.isfinite(rr) and rr > r_lo and rr < r_hi):
+            continue
+        count = 0
+        for k in range(n):
+            if abs(np.hypot(x[k, 0] - ux, x[k, 1] - uy) - rr) <= 1.0:
+                count += 1
+        if count > best_count:
+            best_count = count
+            best_ux = ux
+            best_uy = uy
+            best_rr = rr
+    mask = np.zeros(n, dtype=np.bool_)
+    if best_count < 0:
+        return mask, False
+    for k in range(n):
+        mask[k] = abs(np.hypot(x[k, 0] - best_ux, x[k, 1] - best_uy) - best_rr) <= 1.0
+    return mask, True
+
+
 def _circle_fit(pts: np.ndarray, r_lo: float, r_hi: float,
                 triples: np.ndarray) -> tuple[float, float, float] | None:
     """Coarse image-plane circle through edge points, robust to many foreign points.
@@ -349,23 +487,10 @@ def _circle_fit(pts: np.ndarray, r_lo: float, r_hi: float,
     x[:, :2] = pts - m
     x[:, 2] = 1.0
     x[:, 3] = -(x[:, 0] ** 2 + x[:, 1] ** 2)
-    t = triples
-    a, b, c = x[t[:, 0]], x[t[:, 1]], x[t[:, 2]]
-    aa, bb, cc = -a[:, 3], -b[:, 3], -c[:, 3]
-    d = 2.0 * (a[:, 0] * (b[:, 1] - c[:, 1]) + b[:, 0] * (c[:, 1] - a[:, 1])
-               + c[:, 0] * (a[:, 1] - b[:, 1]))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ux = (aa * (b[:, 1] - c[:, 1]) + bb * (c[:, 1] - a[:, 1]) + cc * (a[:, 1] - b[:, 1])) / d
-        uy = (aa * (c[:, 0] - b[:, 0]) + bb * (a[:, 0] - c[:, 0]) + cc * (b[:, 0] - a[:, 0])) / d
-        rr = np.hypot(a[:, 0] - ux, a[:, 1] - uy)
-    good = np.isfinite(rr) & (rr > r_lo) & (rr < r_hi)
-    if not good.any():
+    mask, found = _ransac_circle(x, triples, float(r_lo), float(r_hi))
+    if not found:
         return None
-    ux, uy, rr = ux[good], uy[good], rr[good]
-    dist = np.abs(np.hypot(x[None, :, 0] - ux[:, None], x[None, :, 1] - uy[:, None])
-                  - rr[:, None])
-    best = int(np.argmax((dist <= 1.0).sum(axis=1)))
-    keep = x[dist[best] <= 1.0]
+    keep = x[mask]
     out = None
     for it in range(2):
         if keep.shape[0] < 5:
@@ -442,6 +567,39 @@ class BallDetector:
         self._rwc = camera.R_wc.tolist()
         self._triples: dict[int, np.ndarray] = {}
         self._last: tuple[float, float] | None = None
+        self._track: tuple[np.ndarray, np.ndarray] | None = None
+        self._gate_theta: float | None = None
+
+    def set_track(self, ball_angle: ArrayLike, centre_radius: ArrayLike) -> None:
+        """The ball's track: distance of the ball centre from the axis [m] by its angle.
+
+        Parameters
+        ----------
+        ball_angle : array_like
+            Polar angles of the ball centre in frame coordinates, clockwise from the
+            frame's +y axis (``psi = theta + atan2(x, y)``), increasing over one turn [rad].
+        centre_radius : array_like
+            ``|p|`` at those angles [m] (the offset curve of the contour).
+        """
+        a = np.asarray(ball_angle, float)
+        r = np.asarray(centre_radius, float)
+        if a.ndim != 1 or a.shape != r.shape or a.size < 8 or np.any(np.diff(a) <= 0):
+            raise ValueError("track: increasing ball angles and radii of the same length")
+        self._track = (a, r)
+
+    def _off_track(self, fit: _Fit) -> str:
+        """Why a fit is not the ball on its track (empty: it may be)."""
+        if self._track is None or self._gate_theta is None or not self.config.track_gate:
+            return ""
+        x, y = float(fit.world[0]), float(fit.world[1])
+        a, r = self._track
+        psi = self._gate_theta + math.atan2(x, y)
+        expect = float(np.interp(psi, a, r, period=2.0 * math.pi))
+        dr = math.hypot(x, y) - expect
+        if abs(dr) > self.config.track_gate:
+            return (f"object {1e3 * dr:+.0f} mm off the ball's track (gate "
+                    f"{1e3 * self.config.track_gate:g} mm): part of the frame")
+        return ""
 
     # -- state -----------------------------------------------------------------------------
     @property
@@ -469,7 +627,7 @@ class BallDetector:
     # -- main entry ------------------------------------------------------------------------
     def detect(self, image: ArrayLike, theta: float = 0.0, *,
                hint: tuple[float, float] | None = None,
-               use_roi: bool | None = None) -> Detection:
+               use_roi: bool | None = None, gate: bool = True) -> Detection:
         """Find the ball in one frame.
 
         Parameters
@@ -484,6 +642,9 @@ class BallDetector:
             Where to look first [px] (default: the last fix).
         use_roi : bool, optional
             Override ``config.use_roi`` for this call.
+        gate : bool
+            Apply the track gate (needs the track and a true theta; pass False when theta
+            is a stand-in value).
 
         Returns
         -------
@@ -504,6 +665,7 @@ class BallDetector:
             return Detection(DetectionStatus.INVALID_INPUT, f"theta must be finite, got {theta}",
                              processing_time=time.perf_counter() - t0)
         roi_on = self.config.use_roi if use_roi is None else bool(use_roi)
+        self._gate_theta = theta if gate else None
         where = hint if hint is not None else self._last
         result: Detection | None = None
         u = v = math.nan
@@ -512,7 +674,8 @@ class BallDetector:
         if math.isfinite(u) and math.isfinite(v):
             # tracking: refine straight from the last fix (the ball moved a few pixels) ...
             fit = self._refine(gray, scale, u, v)
-            if fit.ok and fit.confidence >= self.config.min_confidence:
+            if fit.ok and fit.confidence >= self.config.min_confidence \
+                    and not self._off_track(fit):
                 result = self._found(fit, theta, "roi", fit.box)
             else:  # ... else look for candidates in the region of interest
                 result = self._search(gray, scale, theta, self._roi((u, v)), "roi")
@@ -644,11 +807,12 @@ class BallDetector:
             if found and score < cfg.ambiguity_score * top_score:
                 break
             fit = self._refine(gray, scale, u, v)
-            if fit.ok:
+            off = self._off_track(fit) if fit.ok else ""
+            if fit.ok and not off:
                 if not any(math.hypot(fit.u - f.u, fit.v - f.v) < self._r_px for f in found):
                     found.append(fit)
             else:
-                reasons.append(fit.reason)
+                reasons.append(off or fit.reason)
         if not found:
             why = reasons[0] if reasons else "no candidate"
             return Detection(DetectionStatus.NOT_FOUND,
@@ -717,35 +881,8 @@ class BallDetector:
         xs = cs + (cu + cos * np.float32(start))[:, None]
         ys = sn + (cv + sin * np.float32(start))[:, None]
         prof = _sample(patch, xs, ys)
-        n, m = prof.shape
-        g = prof[:, :-2] - prof[:, 2:]  # g[:, i] = -dI/ds at sample i + 1 [DN per px]
-        j = np.argmax(g[:, pad - 1:m - pad - 1], axis=1) + pad  # steepest sample
-        row0 = np.arange(n) * m
-        gw = g.reshape(-1)[(row0 - np.arange(n) * 2 + j - 1)[:, None] + _WIN_OFF]
-        above = gw >= np.float32(0.5) * gw[:, _HALF:_HALF + 1]
-        nl = np.logical_and.accumulate(above[:, _HALF - 1::-1], axis=1).sum(axis=1)
-        nr = np.logical_and.accumulate(above[:, _HALF + 1:], axis=1).sum(axis=1)
-        flat = prof.reshape(-1)
-        rj = row0 + j
-        inner = flat[(rj - nl - 2)[:, None] - _LEVEL_OFF].sum(axis=1) * np.float32(0.2)
-        outer = flat[(rj + nr + 2)[:, None] + _LEVEL_OFF].sum(axis=1) * np.float32(0.2)
-        mid = 0.5 * (inner + outer)
-        jc = j + (nr - nl) // 2  # middle of the ramp
-        seg = flat[(row0 + jc)[:, None] + _SEG_OFF]  # (n, 7): offsets -3..3
-        hi_ = seg >= mid[:, None]
-        cross = hi_[:, :-1] & ~hi_[:, 1:]  # falls through mid between k and k + 1
-        dist = np.where(cross, _SEG_DIST, np.inf)
-        k = np.argmin(dist, axis=1)
-        rows = np.arange(n)
-        has = dist[rows, k] < np.inf
-        a = seg[rows, k]
-        den = a - seg[rows, k + 1]
-        frac = (a - mid) / np.where(has, den, np.float32(1.0))
-        se = np.float32(start) + 0.5 * (jc + k - 3 + frac)
-        pts = np.empty((n, 2))
-        pts[:, 0] = cu + cos * se
-        pts[:, 1] = cv + sin * se
-        contrast = inner - outer
+        pts, contrast, outer, has, nl, nr = _edge_kernel(prof, pad, _HALF, float(start), cu, cv,
+                                                         cos, sin)
         ok = has & (contrast >= max(self.config.min_contrast, self.config.min_cnr * sigma))
         ok &= (nl < _HALF) & (nr < _HALF)  # a ramp longer than the window is not an edge
         return ang, pts, contrast, outer, ok  # NaN samples (off the image) fail the tests

@@ -13,6 +13,17 @@ latest camera fix:
    v_s)``, clamped to the actuator's +-torque_limit (rig.yaml; the unclamped value is
    reported).
 
+Actuation delay. On hardware a torque acts some time after the encoder sample it answers
+(camera processing, transport, the drive's update): ``lead`` [s]. Steps 2-4 are then
+computed for the state predicted ``lead`` ahead, ``x(t + lead)``, by integrating the
+controller's model (RK4 in steps of at most 1 ms) from the estimate at t under the torque
+that acts meanwhile, the previous command (it is held until the new one arrives):
+
+    x(t + lead) = RK4[model, u_prev](x(t), lead),
+
+so the law answers the state the torque will meet, as on a delay-free loop (a Smith
+predictor on the model; the node measures ``lead`` per step). ``lead = 0`` is the plain law.
+
 A supervisor (state machine) decides whether to apply it:
 
 - ``WAITING``: no usable ball yet (fewer than ``acquire_frames`` valid fixes, or the ball is
@@ -121,7 +132,7 @@ class SupervisorConfig:
     """
 
     acquire_frames: int = 4
-    lost_timeout: float = 0.1
+    lost_timeout: float = 0.25
     min_phi_dot: float = 0.3
     max_abs_y: float = 0.6
     max_abs_z: float = 2.0
@@ -226,6 +237,8 @@ class Command:
         Commanded y_ddot [rad/s^2] (0 when not rolling).
     new_fix : bool
         A valid camera fix was fused in this step.
+    lead : float
+        Actuation delay the law predicted through [s] (module docstring).
     """
 
     t: float
@@ -241,6 +254,7 @@ class Command:
     z: float = math.nan
     w: float = 0.0
     new_fix: bool = False
+    lead: float = 0.0
 
 
 class OrbitalController:
@@ -286,14 +300,39 @@ class OrbitalController:
         self.mode = WAITING
         self.reason = "no ball observation yet"
         self.lost_at: float | None = None
+        self.last_torque = 0.0  # the command that acts until the next one [N m]
 
     def _lose(self, t: float, reason: str) -> None:
         self.mode = BALL_LOST
         self.reason = reason
         self.lost_at = t
 
+    def predict(self, x: np.ndarray, lead: float, u: float) -> np.ndarray:
+        """``x(t + lead)`` on the controller's model under the held torque u (module docstring).
+
+        Parameters
+        ----------
+        x : ndarray, shape (4,)
+            ``[theta, phi, theta_dot, phi_dot]`` at t.
+        lead : float
+            Prediction horizon [s] (<= 0: x itself).
+        u : float
+            Torque acting meanwhile [N m].
+
+        Returns
+        -------
+        ndarray, shape (4,)
+        """
+        if not lead > 0.0:
+            return x
+        n = max(1, math.ceil(lead / 1e-3))
+        x6 = np.zeros(6)
+        x6[:4] = x
+        return self.model.step(x6, u, lead / n, n)[:4]
+
     def step(self, t: float, theta: float, theta_dot: float,
-             ball: BallObservation | Iterable[BallObservation] | None = None) -> Command:
+             ball: BallObservation | Iterable[BallObservation] | None = None,
+             lead: float = 0.0) -> Command:
         """One control step.
 
         Parameters
@@ -304,6 +343,9 @@ class OrbitalController:
             Encoder frame angle [rad] and rate [rad/s].
         ball : BallObservation or iterable of them or None
             Camera fixes that arrived since the last step (None: none).
+        lead : float
+            Time from the encoder sample to the moment the command acts [s]; the law is
+            evaluated on the state predicted that far ahead (module docstring).
 
         Returns
         -------
@@ -335,7 +377,7 @@ class OrbitalController:
         since_fix = t - est.last_fix_t
         if self.mode == WAITING:
             if since_fix > sup.lost_timeout:
-                est.reset()  # the ball went away before we locked on
+                est.restart("lost")  # the ball went away before we locked on
                 self.reason = "ball seen, then lost again before acquisition"
                 return Command(t=t, mode=self.mode, reason=self.reason, new_fix=new_fix)
             if est.frames < sup.acquire_frames:
@@ -359,8 +401,22 @@ class OrbitalController:
                 self._lose(t, f"ball speed {z:.3g} rad/s off the orbit "
                               f"(max {sup.max_abs_z} rad/s)")
         if self.mode != ROLLING:
+            self.last_torque = 0.0
             return Command(t=t, mode=self.mode, reason=self.reason, phi=phi, phi_dot=phi_dot,
                            I=I_dev, y=y, y_dot=y_dot, z=z, new_fix=new_fix)
+        lead = min(max(float(lead), 0.0), sup.lost_timeout) if math.isfinite(lead) else 0.0
+        if lead > 0.0:
+            xp = self.predict(np.array([theta, phi, theta_dot, phi_dot]), lead,
+                              self.last_torque)
+            if bool(np.all(np.isfinite(xp))):
+                theta, phi, theta_dot, phi_dot = (float(v) for v in xp)
+                th0, th1, th2, Y, k_i, k_y, k_yd = self._tab(phi).tolist()
+                y = theta - th0
+                y_dot = theta_dot - th1 * phi_dot
+                I_dev = phi_dot * phi_dot - Y
+                z = phi_dot - math.sqrt(Y)
+            else:
+                lead = 0.0
         w = k_i * I_dev + k_y * y + k_yd * y_dot
         u = pfl_kernel(theta, phi, theta_dot, phi_dot, th1, th2, w, *self._args)
         if ctl.friction_viscous or ctl.friction_coulomb:
@@ -368,9 +424,12 @@ class OrbitalController:
                   + ctl.friction_coulomb * math.tanh(theta_dot / ctl.friction_smoothing))
         lim = self.torque_limit
         u_sat = lim if u > lim else (-lim if u < -lim else u)
+        if not math.isfinite(u_sat):
+            u_sat = 0.0
+        self.last_torque = u_sat
         return Command(t=t, mode=self.mode, reason=self.reason, torque=u_sat, torque_unsat=u,
                        phi=phi, phi_dot=phi_dot, I=I_dev, y=y, y_dot=y_dot, z=z, w=w,
-                       new_fix=new_fix)
+                       new_fix=new_fix, lead=lead)
 
     def orbit_state(self, phi: float) -> np.ndarray:
         """State ``[theta, phi, theta_dot, phi_dot]`` on the controller's orbit at phi."""

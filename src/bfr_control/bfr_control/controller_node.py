@@ -22,11 +22,24 @@ Safety, in the node whatever the core does:
   orbit) is latched: zero torque until the node is restarted or ``~/reset`` is called;
 - with the observation trigger a joint_states sample ``loop.max_step_gap`` after the last
   step runs a step anyway, so a dead camera is noticed in time;
-- no joint_states for ``safety.watchdog_timeout`` seconds of wall time (dead driver or
-  simulator), non-finite or malformed samples, or samples stamped more than
-  ``safety.max_stamp_age`` away from the node's clock: zero torque, mode FAULT, an error
-  log; the controller starts afresh (WAITING) when good samples return;
+- no joint_states for ``safety.watchdog_timeout`` seconds of the node's clock (simulated
+  time under ``use_sim_time``: dead driver or simulator), non-finite or malformed samples,
+  or samples stamped more than ``safety.max_stamp_age`` away from the node's clock: zero
+  torque, mode FAULT, an error log; the controller starts afresh (WAITING) when good
+  samples return;
+- an exception in any callback (a bug, or input no check foresaw) never ends the node: it
+  puts the controller in FAULT with zero torque, logged once with its reason (exception
+  type, message and where), and the controller restarts in WAITING at the next step that
+  runs without one;
 - on shutdown (SIGINT/SIGTERM) a last zero command is published.
+
+Actuation delay. The node measures, at every step, how far its clock has run past the
+encoder sample the step answers (``now - t_sample``: camera processing, transport and
+queueing), adds ``loop.actuation_delay`` (from publication to the moment the drive applies
+the command) and hands the sum to the core as ``lead``, which predicts the state through
+it (bfr_control.controller). The measured delay's median, 99th percentile and maximum are
+logged on exit. Under lock-step simulation the clock waits for the controller, so the
+measured part is 0.
 
 A freshly started node picks up a rolling ball (WAITING -> ROLLING once it has seen it near
 the orbit) or, if the ball is seen but stays off the orbit for ``safety.acquire_timeout``,
@@ -36,23 +49,29 @@ watching.
 
 from __future__ import annotations
 
+import functools
 import math
 import time
+import traceback
+from collections import deque
+from collections.abc import Callable
 from typing import Any
 
-from bfr_model.param_file import config_path, one_of
+from bfr_model.param_file import check, config_path, nonnegative, one_of
 from bfr_model.params import default_params_path, params_from_dict
 from bfr_ros.node_common import (
     COMMAND_QOS,
     JOINT_STATES_QOS,
     STATE_QOS,
+    CdrError,
     declare_parameter_tree,
+    format_published,
     load_yaml_parameters,
+    parse_joint_state,
     read_parameter_tree,
     run_node,
     stamp_to_ns,
 )
-from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -88,6 +107,26 @@ def node_defaults() -> dict[str, Any]:
     return d
 
 
+def guarded(where: str) -> Callable:
+    """Run a callback of :class:`ControllerNode` so that an exception puts it in FAULT.
+
+    Parameters
+    ----------
+    where : str
+        Name of the callback for the log line.
+    """
+    def wrap(fn: Callable) -> Callable:
+        @functools.wraps(fn)
+        def run(self: ControllerNode, *args: Any) -> Any:
+            try:
+                return fn(self, *args)
+            except Exception as exc:  # noqa: BLE001 - any error: zero torque, not a crash
+                self._on_exception(where, exc)
+                return args[-1] if where == "reset" else None
+        return run
+    return wrap
+
+
 class ControllerNode(Node):
     """ROS 2 wrapper of :class:`OrbitalController` (module docstring)."""
 
@@ -107,37 +146,55 @@ class ControllerNode(Node):
         one_of("loop.trigger", self.trigger, ("observation", "joint_states", "timer"))
         self.joint_name = str(loop["joint_name"])
         self.max_gap_ns = round(float(loop["max_step_gap"]) * _NS)
+        self.actuation_delay = float(loop["actuation_delay"])
+        nonnegative("loop.actuation_delay", self.actuation_delay)
+        self.predict = bool(loop["predict_delay"])
         self.watchdog_timeout = float(safety["watchdog_timeout"])
+        check(self.watchdog_timeout > 0, "safety.watchdog_timeout",
+              f"must be > 0 s, got {self.watchdog_timeout}")
         self.max_age_ns = round(float(safety["max_stamp_age"]) * _NS)
         self.acquire_timeout = float(safety["acquire_timeout"])
         self.limit = self.ctrl.torque_limit
+        ceiling = float(safety["max_torque"])
+        check(0.0 < self.limit <= ceiling, "actuator.torque_limit",
+              f"{self.limit:g} N m is above the node's ceiling safety.max_torque = {ceiling:g} "
+              f"N m (raise that only for a stronger motor)")
         self.cmd_pub = self.create_publisher(Float64MultiArray, "effort_controller/commands",
                                              COMMAND_QOS)
         self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
-        self.create_subscription(JointState, "joint_states", self._on_joints, JOINT_STATES_QOS)
-        self.create_subscription(BallObservationMsg, "ball_observation", self._on_ball,
-                                 STATE_QOS)
+        # joint_states arrive serialized and are parsed here (parse_joint_state): no Python
+        # message object per encoder sample at the encoder's rate
+        self.js_sub = self.create_subscription(JointState, "joint_states", self._on_joints,
+                                               JOINT_STATES_QOS, raw=True)
+        self.obs_sub = self.create_subscription(BallObservationMsg, "ball_observation",
+                                                self._on_ball, STATE_QOS)
         self.create_service(Trigger, "~/reset", self._on_reset)
-        self._steady = Clock(clock_type=ClockType.STEADY_TIME)
-        self.create_timer(min(0.1, self.watchdog_timeout / 2.0), self._watchdog,
-                          clock=self._steady)
+        # timeouts on the node's clock: simulated time under use_sim_time
+        self.create_timer(min(0.1, self.watchdog_timeout / 2.0), self._watchdog)
         if self.trigger == "timer":
             self.create_timer(1.0 / config.control.rate, self._on_timer)
         self.js: tuple[int, float, float] | None = None  # newest good sample
-        self.js_wall = time.monotonic()
+        self.js_clock_ns = self.get_clock().now().nanoseconds  # node clock at its arrival
         self.first_js_ns: int | None = None
         self.last_step_ns: int | None = None
         self.pending: list[BallObservation] = []
         self.fault = ""  # why the node is in FAULT (empty: not)
+        self.exception_fault = False  # the FAULT is an exception's (cleared by a good step)
+        self.reported_exceptions: set[str] = set()
+        self.delays: deque[float] = deque(maxlen=20000)  # measured now - t_sample [s]
         self.reported_mode = -1
         self.off_orbit_since: float | None = None
         self.reported_lost = False
         self.stats = {"steps": 0, "observations": 0, "rolling_steps": 0, "faults": 0,
-                      "saturated": 0}
+                      "saturated": 0, "exceptions": 0, "commands": 0, "states": 0}
         self.executor_ref: Any = None
         self.get_logger().info(
-            f"controller: trigger {self.trigger}, torque limit {self.limit:g} N m, orbit mean "
-            f"phi_dot {self.ctrl.orbit.summary().get('mean_phi_dot', float('nan')):.3g} rad/s, "
+            f"controller: {self.js_sub.topic_name} + {self.obs_sub.topic_name} -> "
+            f"{self.cmd_pub.topic_name}, trigger {self.trigger}, torque limit {self.limit:g} "
+            f"N m, lost timeout {self.ctrl.config.supervisor.lost_timeout:g} s, actuation delay "
+            f"{'measured + ' if self.predict else 'not predicted; '}"
+            f"{1e3 * self.actuation_delay:g} ms, orbit mean phi_dot "
+            f"{self.ctrl.orbit.summary().get('mean_phi_dot', float('nan')):.3g} rad/s, "
             f"set up in {setup:.2f} s; mode WAITING (no ball yet)")
 
     def _warm_up(self) -> None:
@@ -152,26 +209,28 @@ class ControllerNode(Node):
         for k in range(8):
             t = 0.005 * k
             ctrl.step(t, float(x[0]) + float(x[2]) * t, float(x[2]),
-                      BallObservation(t, float(pos[0]), float(pos[1]), True))
+                      BallObservation(t, float(pos[0]), float(pos[1]), True), lead=0.002)
         ctrl.reset()
 
     # -- inputs ----------------------------------------------------------------------------
-    def _parse_joints(self, msg: JointState) -> tuple[int, float, float] | str | None:
+    def _parse_joints(self, raw: bytes) -> tuple[int, float, float] | str | None:
         """(t_ns, theta, theta_dot), a fault string, or None (another joint's message)."""
-        names = list(msg.name)
+        try:
+            t_ns, names, position, velocity, _ = parse_joint_state(raw)
+        except CdrError as exc:
+            return f"malformed message on {self.js_sub.topic_name}: {exc}"
         if self.joint_name in names:
             j = names.index(self.joint_name)
-        elif not names and len(msg.position) == 1:
+        elif not names and len(position) == 1:
             j = 0
         else:
             return None
-        if j >= len(msg.position) or j >= len(msg.velocity):
+        if j >= len(position) or j >= len(velocity):
             return (f"joint_states for {self.joint_name!r} lack position or velocity "
-                    f"({len(msg.position)} positions, {len(msg.velocity)} velocities)")
-        theta, theta_dot = float(msg.position[j]), float(msg.velocity[j])
+                    f"({len(position)} positions, {len(velocity)} velocities)")
+        theta, theta_dot = float(position[j]), float(velocity[j])
         if not (math.isfinite(theta) and math.isfinite(theta_dot)):
             return f"non-finite joint_states sample (theta {theta}, theta_dot {theta_dot})"
-        t_ns = stamp_to_ns(msg.header.stamp)
         clock = self.get_clock()
         now = clock.now().nanoseconds
         if now > 0 and abs(now - t_ns) > self.max_age_ns:
@@ -180,17 +239,37 @@ class ControllerNode(Node):
                     f"(use_sim_time must match the publisher's clock)")
         return t_ns, theta, theta_dot
 
-    def _on_joints(self, msg: JointState) -> None:
-        got = self._parse_joints(msg)
+    def _on_exception(self, where: str, exc: Exception) -> None:
+        """An exception in a callback: FAULT with zero torque, logged once per reason."""
+        self.stats["exceptions"] += 1
+        frame = traceback.extract_tb(exc.__traceback__)[-1] if exc.__traceback__ else None
+        at = f" at {frame.filename.rsplit('/', 1)[-1]}:{frame.lineno}" if frame else ""
+        why = f"{type(exc).__name__} in {where}: {exc}{at}"
+        key = f"{type(exc).__name__}{at}"
+        if key not in self.reported_exceptions:
+            self.reported_exceptions.add(key)
+            self.get_logger().error(f"exception ({why}); the controller is in FAULT with zero "
+                                    f"torque until a step runs cleanly again")
+        try:
+            self.ctrl.reset()
+            self.pending.clear()
+            self.last_step_ns = None
+        finally:
+            self._enter_fault(why, None, log=False)
+            self.exception_fault = True
+
+    @guarded("joint_states")
+    def _on_joints(self, raw: bytes) -> None:
+        got = self._parse_joints(raw)
         if got is None:
             return
         if isinstance(got, str):
-            self._enter_fault(got, stamp_to_ns(msg.header.stamp))
+            self._enter_fault(got, None)
             return
-        self.js_wall = time.monotonic()
-        if self.fault:
-            self.get_logger().info(f"joint_states good again after: {self.fault}; controller "
-                                   f"restarts in WAITING")
+        self.js_clock_ns = self.get_clock().now().nanoseconds
+        if self.fault and not self.exception_fault:
+            self.get_logger().info(f"{self.js_sub.topic_name} good again after: {self.fault}; "
+                                   f"controller restarts in WAITING")
             self.fault = ""
             self.ctrl.reset()
             self.pending.clear()
@@ -201,7 +280,7 @@ class ControllerNode(Node):
         t_ns = got[0]
         if self.first_js_ns is None:
             self.first_js_ns = t_ns
-            self.get_logger().info("joint_states are arriving")
+            self.get_logger().info(f"{self.js_sub.topic_name} is arriving")
         ref = self.last_step_ns if self.last_step_ns is not None else self.first_js_ns
         if self.trigger == "joint_states":
             self._step()
@@ -212,6 +291,7 @@ class ControllerNode(Node):
         else:
             self.ctrl.estimator.record(t_ns / _NS, got[1], got[2])
 
+    @guarded("ball_observation")
     def _on_ball(self, msg: BallObservationMsg) -> None:
         self.stats["observations"] += 1
         t_ns = stamp_to_ns(msg.header.stamp)
@@ -220,14 +300,16 @@ class ControllerNode(Node):
         if len(self.pending) > 50:  # no joint_states to fuse them with: keep the newest
             del self.pending[:-50]
         if self.trigger == "observation" and self.js is not None and self.js[0] >= t_ns \
-                and not self.fault:
+                and (not self.fault or self.exception_fault):
             self._step()
 
+    @guarded("timer")
     def _on_timer(self) -> None:
-        if self.js is not None and not self.fault and (
+        if self.js is not None and (not self.fault or self.exception_fault) and (
                 self.last_step_ns is None or self.js[0] > self.last_step_ns):
             self._step()
 
+    @guarded("reset")
     def _on_reset(self, request: Any, response: Any) -> Any:
         self.ctrl.reset()
         self.pending.clear()
@@ -239,16 +321,29 @@ class ControllerNode(Node):
         return response
 
     # -- the control step --------------------------------------------------------------------
+    def _lead(self, t_ns: int) -> float:
+        """Time from the encoder sample to the moment this step's command acts [s]."""
+        now = self.get_clock().now().nanoseconds
+        delay = max(now - t_ns, 0) / _NS if now > 0 else 0.0
+        self.delays.append(delay)
+        return delay + self.actuation_delay if self.predict else 0.0
+
     def _step(self) -> None:
-        assert self.js is not None
+        if self.js is None:
+            return
         t_ns, theta, theta_dot = self.js
         t = t_ns / _NS
         due = [o for o in self.pending if o.t <= t + 1e-9]
         if due:
             self.pending = [o for o in self.pending if o.t > t + 1e-9]
-        cmd = self.ctrl.step(t, theta, theta_dot, due or None)
+        cmd = self.ctrl.step(t, theta, theta_dot, due or None, lead=self._lead(t_ns))
         self.last_step_ns = t_ns
         self.stats["steps"] += 1
+        if self.exception_fault:  # a clean step: out of the exception's FAULT
+            self.get_logger().info(f"a control step ran cleanly again after: {self.fault}; "
+                                   f"controller restarts in WAITING")
+            self.fault = ""
+            self.exception_fault = False
         # the core clamps to the actuator's limit; the node only refuses a non-finite value
         torque = cmd.torque if (cmd.mode == ROLLING and math.isfinite(cmd.torque)) else 0.0
         mode = MODE_CODES[cmd.mode]
@@ -283,7 +378,7 @@ class ControllerNode(Node):
                      f"phi_dot = {cmd.phi_dot:.3f} rad/s")
         elif mode == ControllerState.BALL_LOST and cmd.mode == BALL_LOST:
             log.error(f"BALL_LOST at t = {t:.3f} s: {reason}; torque 0 (latched: restart the "
-                      f"node or call ~/reset)")
+                      f"node or call ~/reset); last lead {1e3 * cmd.lead:.1f} ms")
         elif mode == ControllerState.WAITING:
             log.info(f"WAITING at t = {t:.3f} s: {reason}")
 
@@ -292,6 +387,7 @@ class ControllerNode(Node):
         out = Float64MultiArray()
         out.data = [float(torque)]
         self.cmd_pub.publish(out)
+        self.stats["commands"] += 1
         st = ControllerState()
         st.header.stamp.sec, st.header.stamp.nanosec = t_ns // _NS, t_ns % _NS
         st.mode = mode
@@ -313,18 +409,21 @@ class ControllerNode(Node):
         st.saturated = st.torque != st.torque_unsaturated
         self.stats["saturated"] += int(st.saturated)
         self.state_pub.publish(st)
+        self.stats["states"] += 1
 
     # -- faults ----------------------------------------------------------------------------
-    def _enter_fault(self, why: str, t_ns: int | None) -> None:
-        log = self.get_logger()
+    def _enter_fault(self, why: str, t_ns: int | None, log: bool = True) -> None:
+        logger = self.get_logger()
         if not self.fault:
             self.stats["faults"] += 1
             was = self.ctrl.mode
-            log.error(f"FAULT: {why}; torque 0" + (" (the ball was rolling: it is lost)"
-                                                    if was == ROLLING else ""))
-        else:
-            log.error(f"FAULT: {why}", throttle_duration_sec=2.0)
+            if log:
+                logger.error(f"FAULT: {why}; torque 0" + (
+                    " (the ball was rolling: it is lost)" if was == ROLLING else ""))
+        elif log and why != self.fault:
+            logger.error(f"FAULT: {why}", throttle_duration_sec=2.0)
         self.fault = why
+        self.exception_fault = False
         if t_ns is None:
             t_ns = self.js[0] if self.js is not None else self.get_clock().now().nanoseconds
         theta, theta_dot = (self.js[1], self.js[2]) if self.js is not None else (math.nan,
@@ -332,16 +431,20 @@ class ControllerNode(Node):
         self._publish(t_ns, 0.0, ControllerState.FAULT, theta, theta_dot, None)
         self.reported_mode = ControllerState.FAULT
 
+    @guarded("watchdog")
     def _watchdog(self) -> None:
-        gap = time.monotonic() - self.js_wall
+        now = self.get_clock().now().nanoseconds
+        if now < self.js_clock_ns:  # the clock went back (a simulation restarted)
+            self.js_clock_ns = now
+        gap = (now - self.js_clock_ns) / _NS
         if self.first_js_ns is None:  # not armed before the first sample
             if gap > 5.0 and not self.fault:
-                self.get_logger().warn("no joint_states received yet (joint_states)",
-                                       throttle_duration_sec=10.0)
+                self.get_logger().warn(f"no joint_states received yet on "
+                                       f"{self.js_sub.topic_name}", throttle_duration_sec=10.0)
             return
         if gap > self.watchdog_timeout:
-            self._enter_fault(f"no joint_states for {gap:.2f} s (wall time): encoder driver or "
-                              f"simulator dead", None)
+            self._enter_fault(f"no {self.js_sub.topic_name} for {gap:.2f} s of the node's "
+                              f"clock: encoder driver or simulator dead", None)
 
     def on_shutdown(self) -> None:
         """Publish a last zero command and log the counts."""
@@ -349,10 +452,19 @@ class ControllerNode(Node):
         out.data = [0.0]
         self.cmd_pub.publish(out)
         s = self.stats
+        est = self.ctrl.estimator
+        d = sorted(self.delays)
+        delay = (f"measured delay sample -> publication median {1e3 * d[len(d) // 2]:.2f} ms, "
+                 f"p99 {1e3 * d[min(len(d) - 1, int(0.99 * len(d)))]:.2f} ms, max "
+                 f"{1e3 * d[-1]:.2f} ms" if d else "no delay measured")
         self.get_logger().info(
             f"controller: {s['steps']} steps ({s['rolling_steps']} rolling, {s['saturated']} "
-            f"saturated), {s['observations']} observations, {s['faults']} fault(s); zero "
-            f"torque published on exit")
+            f"saturated), {s['observations']} observations, {s['faults']} fault(s), "
+            f"{s['exceptions']} exception(s); gate: {est.rejected['radial']} + "
+            f"{est.rejected['innovation']} fixes rejected, restarts {est.restarts}; {delay}; "
+            f"zero torque published on exit")
+        self.get_logger().info(format_published({self.cmd_pub.topic_name: s["commands"] + 1,
+                                                 self.state_pub.topic_name: s["states"]}))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -30,6 +30,29 @@ with exposure time t_e is fused after propagating that estimate to t_e through t
 encoder history, and the result is propagated on to the present. Missing, invalid (NaN,
 ``valid = False``), stale (not newer than the last fix) or future-stamped fixes are
 ignored: the estimate then simply runs on the model.
+
+Gaps. Between fixes the estimate is the model's prediction driven by the measured frame
+motion; its variance grows as ``P11 + 2 dt P12 + dt^2 P22 + q dt^3 / 3``. With the shipped
+``accel_noise`` (q = 0.25 rad^2/s^3) the filter's own bound on the error of phi after a gap
+of 0.15 s is 17 mrad (one standard deviation) and after 0.25 s 36 mrad, while the ball moves
+0.36 and 0.6 rad at the orbit's 2.4 rad/s; measured in closed loop on the nominal plant the
+largest error over such gaps is 6 and 15 mrad (tests/test_control_estimator.py). The
+controller's supervisor rides through gaps up to ``supervisor.lost_timeout`` (0.25 s) on
+this prediction.
+
+Gate. A fix is *absurd*, and is rejected, when the ball centre it reports is further than
+``radial_gate`` [m] from the ball-centre curve in the radial direction (``| |r| - |p(phi)| |``,
+the camera's fix cannot be a ball on this frame), or when its innovation is larger than
+``gate_sigma`` standard deviations of the predicted innovation (``|nu| > gate_sigma
+sqrt(P11 + R)``). ``reinit_after`` rejected fixes in a row restart the filter from the
+newest fix (the filter, not the camera, is then the one that is wrong); a fix that arrives
+after a gap longer than ``max_gap`` is likewise used to restart it rather than fused.
+
+Robustness. Every path copes with an empty, one-sample or stale encoder history: a fix
+whose exposure the history does not cover is not used; an encoder sample that follows the
+previous one by more than ``max_gap`` restarts the filter (the ball cannot be propagated
+through an encoder gap); a non-finite or absurd estimate (|phi_dot| > ``max_phi_dot``)
+resets it.
 """
 
 from __future__ import annotations
@@ -42,7 +65,7 @@ import numpy as np
 from bfr_model.dynamics import RigidModel, rigid_terms
 from bfr_model.geometry import offset_kernel
 from bfr_model.jit import njit
-from bfr_model.param_file import positive
+from bfr_model.param_file import integer, positive
 
 from bfr_control.orbit import PeriodicOrbit
 from bfr_control.periodic import PeriodicTable
@@ -85,16 +108,35 @@ class EstimatorConfig:
         Standard deviation of the initial phi_dot guess [rad/s].
     history : float
         Encoder history kept for latency compensation [s].
+    gate_sigma : float
+        Innovation gate: a fix whose innovation exceeds this many predicted standard
+        deviations is rejected [-].
+    radial_gate : float
+        Largest radial distance of a fix from the model's ball-centre curve [m].
+    reinit_after : int
+        Rejected fixes in a row after which the filter restarts from the newest one [-].
+    max_gap : float
+        Longest encoder or camera gap the estimate is propagated through; a longer one
+        restarts the filter [s].
+    max_phi_dot : float
+        Largest plausible |phi_dot| [rad/s]; a larger estimate resets the filter.
     """
 
     camera_noise: float = 1.0e-4
     accel_noise: float = 0.5
     phi_dot_sigma0: float = 1.0
     history: float = 0.5
+    gate_sigma: float = 6.0
+    radial_gate: float = 0.02
+    reinit_after: int = 4
+    max_gap: float = 0.5
+    max_phi_dot: float = 50.0
 
     def __post_init__(self) -> None:
-        for name in ("camera_noise", "accel_noise", "phi_dot_sigma0", "history"):
+        for name in ("camera_noise", "accel_noise", "phi_dot_sigma0", "history", "gate_sigma",
+                     "radial_gate", "max_gap", "max_phi_dot"):
             positive(f"estimator.{name}", getattr(self, name))
+        integer("estimator.reinit_after", self.reinit_after, minimum=1)
 
 
 @njit
@@ -108,12 +150,20 @@ def passive_phi_ddot(theta: float, phi: float, theta_dot: float, phi_dot: float,
     lies on the line of the passive row; the model's accelerations at u = 0 and u = 1 give
     two points of it, so the row is used exactly as the model writes it (friction, rolling
     resistance and any perturbation included) without repeating its equations here.
+
+    The line's slope needs ``d theta_ddot / d u`` (``k_u M22 / det M`` > 0) to be resolved
+    in floating point: at an absurd state (|phi_dot| ~ 1e8 rad/s, where adding a unit
+    torque no longer changes theta_ddot) or with no motor gain there is no such line, and
+    NaN is returned instead of dividing by zero; the estimator resets on a NaN.
     """
     a0 = rigid_terms(theta, phi, theta_dot, phi_dot, 0.0, P, R, rho0, orders, ccos, csin,
                      bphi, bh, bw)
     a1 = rigid_terms(theta, phi, theta_dot, phi_dot, 1.0, P, R, rho0, orders, ccos, csin,
                      bphi, bh, bw)
-    return a0[1] + (theta_ddot - a0[0]) * (a1[1] - a0[1]) / (a1[0] - a0[0])
+    den = a1[0] - a0[0]
+    if not abs(den) > 1e-9 * (1.0 + abs(a0[0])):  # also False for NaN
+        return np.nan
+    return a0[1] + (theta_ddot - a0[0]) * (a1[1] - a0[1]) / den
 
 
 class BallEstimator:
@@ -145,14 +195,16 @@ class BallEstimator:
         dpsi_dphi = (py * p1x - px * p1y) / (px * px + py * py)
         dphi_dpsi = 1.0 / dpsi_dphi
         # measurement noise of phi per unit camera noise: dphi/dpsi / |p|
-        gain = dphi_dpsi / np.hypot(px, py)
-        self._inv = PeriodicTable(period, np.column_stack([phi - psi, gain]),
-                                  derivatives=None, names=("phi_minus_psi", "noise_gain"))
+        radius = np.hypot(px, py)
+        gain = dphi_dpsi / radius
+        self._inv = PeriodicTable(period, np.column_stack([phi - psi, gain, radius]),
+                                  derivatives=None,
+                                  names=("phi_minus_psi", "noise_gain", "radius"))
         self.q = config.accel_noise ** 2
         self.reset()
 
     def reset(self) -> None:
-        """Forget everything (no fix yet)."""
+        """Forget everything (no fix yet); the counters of rejected fixes are kept."""
         self.initialized = False
         self.frames = 0  # valid fixes fused since initialisation
         self.last_fix_t = -math.inf  # exposure time of the last valid fix
@@ -167,7 +219,29 @@ class BallEstimator:
         # estimate and covariance at the last fix
         self._m = (math.nan, math.nan, 0.0)
         self._cov = (0.0, 0.0, 0.0)
+        self._t_m = -math.inf
         self.last_innovation = math.nan
+        self.rejected_in_row = 0
+        if not hasattr(self, "rejected"):
+            #: Fixes rejected by the gate, by reason (``radial``, ``innovation``), since start.
+            self.rejected = {"radial": 0, "innovation": 0}
+            #: Filter restarts: ``gate`` (fixes rejected in a row), ``gap``, ``diverged``,
+            #: ``lost`` (the supervisor gave the ball up before acquiring it).
+            self.restarts = {"gate": 0, "gap": 0, "diverged": 0, "lost": 0}
+        self.last_rejection = ""
+
+    def restart(self, why: str) -> None:
+        """Drop the estimate, keep the encoder history: the next valid fix starts anew.
+
+        Parameters
+        ----------
+        why : str
+            ``gate``, ``gap``, ``diverged`` or ``lost`` (counted in :attr:`restarts`).
+        """
+        self.restarts[why] += 1
+        ts, th, thd, last = self._ts, self._th, self._thd, self.last_rejection
+        self.reset()
+        self._ts, self._th, self._thd, self.last_rejection = ts, th, thd, last
 
     # -- helpers ---------------------------------------------------------------------------
     def phi_of_psi(self, psi: float) -> float:
@@ -195,12 +269,18 @@ class BallEstimator:
 
     def _propagate(self, phi: float, phi_dot: float, a: float, t0: float, t1: float
                    ) -> tuple[float, float, float]:
-        """Propagate ``(phi, phi_dot)`` from t0 to t1 through the encoder history."""
+        """Propagate ``(phi, phi_dot)`` from t0 to t1 through the encoder history.
+
+        Over each encoder interval ``[t_i, t_i+1]`` (clipped to ``[t0, t1]``) the frame's
+        acceleration is the interval's constant ``(theta_dot_i+1 - theta_dot_i) / h``; the
+        ball's is evaluated once at the midpoint. Outside the history the estimate is left
+        where it is (nothing to propagate with); NaN in gives NaN out.
+        """
         ts, th, thd = self._ts, self._th, self._thd
-        if t1 <= t0:
+        if t1 <= t0 or len(ts) < 2:
             return phi, phi_dot, a
         i = max(bisect.bisect_right(ts, t0) - 1, 0)
-        t = t0
+        t = max(t0, ts[0])
         while t < t1 - 1e-12 and i < len(ts) - 1:
             ta, tb = ts[i], ts[i + 1]
             if tb <= t:
@@ -219,62 +299,110 @@ class BallEstimator:
             i += 1
         return phi, phi_dot, a
 
+    def _sane(self, phi: float, phi_dot: float) -> bool:
+        return math.isfinite(phi) and math.isfinite(phi_dot) and \
+            abs(phi_dot) <= self.config.max_phi_dot
+
     # -- interface -------------------------------------------------------------------------
     def record(self, t: float, theta: float, theta_dot: float) -> None:
-        """Add an encoder sample and advance the present estimate to t."""
+        """Add an encoder sample and advance the present estimate to t.
+
+        Repeated, out-of-order and non-finite samples are ignored. A sample more than
+        ``max_gap`` after the previous one restarts the filter (module docstring).
+        """
+        if not (math.isfinite(t) and math.isfinite(theta) and math.isfinite(theta_dot)):
+            return
         ts = self._ts
         if ts and t <= ts[-1]:
             return  # repeated or out-of-order sample: ignore
-        t_prev = ts[-1] if ts else None
+        if ts and t - ts[-1] > self.config.max_gap:
+            # nothing links the history to the present: start it again
+            if self.initialized:
+                self.restart("gap")
+            ts.clear()
+            self._th.clear()
+            self._thd.clear()
+        prev = (ts[-1], self._th[-1], self._thd[-1]) if ts else None
         ts.append(t)
         self._th.append(theta)
         self._thd.append(theta_dot)
         if len(ts) > 64 and t - ts[0] > 2.0 * self.config.history:
-            k = bisect.bisect_left(ts, t - self.config.history)
+            k = min(bisect.bisect_left(ts, t - self.config.history), len(ts) - 2)
             del ts[:k]
             del self._th[:k]
             del self._thd[:k]
-        if self.initialized and t_prev is not None:
+        if self.initialized and prev is not None:
             # one step of the propagation of _propagate, over [t_prev, t]
-            th_p, thd_p = self._th[-2], self._thd[-2]
+            t_prev, th_p, thd_p = prev
             h = t - t_prev
             acc = (theta_dot - thd_p) / h
             tm = 0.5 * h
             phi, phi_dot = self.phi, self.phi_dot
             a = passive_phi_ddot(th_p + thd_p * tm + 0.5 * acc * tm * tm, phi + tm * phi_dot,
                                  thd_p + acc * tm, phi_dot + tm * self._a, acc, *self._args)
-            self.phi = phi + h * phi_dot + 0.5 * h * h * a
-            self.phi_dot = phi_dot + h * a
-            self._a = a
+            phi = phi + h * phi_dot + 0.5 * h * h * a
+            phi_dot = phi_dot + h * a
+            if not self._sane(phi, phi_dot):
+                self.restart("diverged")
+                return
+            self.phi, self.phi_dot, self._a = phi, phi_dot, a
+
+    def _reject(self, kind: str, why: str) -> bool:
+        self.rejected[kind] += 1
+        self.rejected_in_row += 1
+        self.last_rejection = why
+        if self.rejected_in_row >= self.config.reinit_after:
+            self.restart("gate")  # the next valid fix starts the filter again
+        return False
+
+    def _initialise(self, psi: float, t_e: float, r: float) -> bool:
+        """First fix: phi from the measurement, phi_dot from the orbit's speed there."""
+        phi_m = self.phi_of_psi(psi)
+        pd = float(math.sqrt(max(float(self.orbit.table(phi_m)[3]), 0.0)))
+        t_now = self._ts[-1]
+        phi, phi_dot, a = self._propagate(phi_m, pd, 0.0, t_e, t_now)
+        if not self._sane(phi, phi_dot):
+            return False
+        self._m = (phi_m, pd, 0.0)
+        self._cov = (r, 0.0, self.config.phi_dot_sigma0 ** 2)
+        self._t_m = t_e
+        self.initialized = True
+        self.frames = 1
+        self.last_fix_t = t_e
+        self.rejected_in_row = 0
+        self.phi, self.phi_dot, self._a = phi, phi_dot, a
+        return True
 
     def update(self, obs: BallObservation) -> bool:
-        """Fuse one camera fix; returns True when it was valid and used."""
+        """Fuse one camera fix; returns True when it was valid and used.
+
+        Not used: a fix that is invalid, non-finite, at the origin (the rig's "no ball"),
+        not newer than the last one, outside the encoder history, or rejected by the gate
+        (module docstring; ``last_rejection`` says why).
+        """
         t_e = float(obs.t)
         if not math.isfinite(t_e) or t_e <= self.last_seen_t:
             return False  # stale or repeated frame
-        self.last_seen_t = t_e
         x, y = float(obs.x), float(obs.y)
         if not (obs.valid and math.isfinite(x) and math.isfinite(y)) or (x == 0.0 and y == 0.0):
+            self.last_seen_t = t_e
             return False
         theta_e = self._theta_at(t_e)
         if theta_e is None:
             return False  # exposure outside the encoder history (future or too old)
+        self.last_seen_t = t_e
         psi = theta_e + math.atan2(x, y)
-        t_now = self._ts[-1]
-        noise_gain = float(self._inv(psi)[1])
-        r = (self.config.camera_noise * noise_gain) ** 2
+        cfg = self.config
+        inv = self._inv(psi)
+        dr = math.hypot(x, y) - float(inv[2])
+        if abs(dr) > cfg.radial_gate:
+            return self._reject("radial", f"fix {1e3 * dr:+.1f} mm off the ball's track "
+                                          f"(gate {1e3 * cfg.radial_gate:g} mm)")
+        r = (cfg.camera_noise * float(inv[1])) ** 2
+        if self.initialized and t_e - self._t_m > cfg.max_gap:
+            self.restart("gap")
         if not self.initialized:
-            # first fix: phi from the measurement, phi_dot from the orbit's speed there
-            phi_m = self.phi_of_psi(psi)
-            pd = float(math.sqrt(self.orbit.table(phi_m)[3]))
-            self._m = (phi_m, pd, 0.0)
-            self._cov = (r, 0.0, self.config.phi_dot_sigma0 ** 2)
-            self._t_m = t_e
-            self.initialized = True
-            self.frames = 1
-            self.last_fix_t = t_e
-            self.phi, self.phi_dot, self._a = self._propagate(phi_m, pd, 0.0, t_e, t_now)
-            return True
+            return self._initialise(psi, t_e, r)
         # propagate the estimate at the last fix to this exposure
         phi_p, pd_p, a_p = self._propagate(*self._m, self._t_m, t_e)
         dt = t_e - self._t_m
@@ -289,17 +417,26 @@ class BallEstimator:
         phi_meas = self.phi_of_psi(psi)
         nu = phi_meas - phi_p
         s = p11 + r
+        if not abs(nu) <= cfg.gate_sigma * math.sqrt(s):  # also catches NaN
+            return self._reject("innovation", f"innovation {nu:+.3g} rad is more than "
+                                              f"{cfg.gate_sigma:g} sigma "
+                                              f"({math.sqrt(s):.2g} rad)")
         k1 = p11 / s
         k2 = p12 / s
         phi_u = phi_p + k1 * nu
         pd_u = pd_p + k2 * nu
+        phi, phi_dot, a = self._propagate(phi_u, pd_u, a_p, t_e, self._ts[-1])
+        if not (self._sane(phi_u, pd_u) and self._sane(phi, phi_dot)):
+            self.restart("diverged")
+            return False
         self._cov = ((1.0 - k1) * p11, (1.0 - k1) * p12, p22 - k2 * p12)
         self._m = (phi_u, pd_u, a_p)
         self._t_m = t_e
         self.frames += 1
         self.last_fix_t = t_e
         self.last_innovation = nu
-        self.phi, self.phi_dot, self._a = self._propagate(phi_u, pd_u, a_p, t_e, t_now)
+        self.rejected_in_row = 0
+        self.phi, self.phi_dot, self._a = phi, phi_dot, a
         return True
 
     @property

@@ -28,8 +28,17 @@ term (denominator ``a r_b - 4 b^2 (2 cos^2 2 theta - 1) - 4 a b cos 2 theta
 the exact solve can be measured (``bfr analyze bounce`` prints it for a closed-loop run):
 the seed attributes the error to the ball centre being R away from the track.
 
-Sharp bumps (``track.asperity_*``) are evaluated from a local index list only (those near
-the ball), so a rough track with hundreds of asperities costs no more than a few.
+Sharp bumps (``track.asperity_*``) are kept in a table sorted by contour angle and padded
+with their copies at ``+-2 pi``: an evaluation at ``phi`` finds the asperities within
+``12`` widths of ``phi mod 2 pi`` by a binary search (:func:`rho012`), so a rough track
+with hundreds of asperities costs no more than the two or three near the point. Each plate
+edge has its own table (``track.asperity_edge``; :func:`contour_data` with ``edge``).
+
+:func:`local_minima` finds every local minimum of the distance within a reach (the contact
+model's event-based search): the smooth contour's closest point by Newton, the window where
+the smooth contour minus the highest asperity is within reach, and in it the sign changes
+of ``f`` sampled at a quarter of the narrowest asperity width, each refined by a bracketed
+Newton iteration (bisection where Newton leaves the bracket).
 """
 
 from __future__ import annotations
@@ -46,13 +55,16 @@ from bfr_model.jit import njit, njit_inline
 from bfr_model.params import RigParams
 
 F = TypeVar("F", bound=Callable)
+TWO_PI = 2.0 * math.pi
 
 __all__ = [
     "ContourData",
     "closest_point",
     "contour_data",
     "contour_point_terms",
+    "local_minima",
     "newton_closest",
+    "newton_inline",
     "rho012",
     "seed_eq_4_36",
     "taylor_closest_point",
@@ -74,7 +86,12 @@ class ContourData:
     bphi, bh, bw : ndarray
         ``track.bump_*``: centres [rad], heights [m], widths [rad].
     aphi, ah, aw : ndarray
-        ``track.asperity_*`` sorted by centre, centres wrapped to [0, 2 pi).
+        ``track.asperity_*`` of this edge sorted by centre, centres wrapped to [0, 2 pi).
+    tphi, th, tw : ndarray
+        The asperity table: ``aphi - 2 pi, aphi, aphi + 2 pi`` (sorted) with their heights
+        and widths; one ``inf`` entry without asperities.
+    span : float
+        ``12`` times the widest asperity [rad] (the evaluation window); -1 without any.
     """
 
     rho0: float
@@ -87,16 +104,19 @@ class ContourData:
     aphi: FloatArray
     ah: FloatArray
     aw: FloatArray
+    tphi: FloatArray
+    th: FloatArray
+    tw: FloatArray
+    span: float
 
     def as_args(self) -> tuple:
-        """Positional arguments of :func:`rho012` after ``phi`` (without the index list)."""
+        """Positional arguments of :func:`rho012` after ``phi``."""
         return (self.rho0, self.orders, self.ccos, self.csin, self.bphi, self.bh, self.bw,
-                self.aphi, self.ah, self.aw)
+                self.tphi, self.th, self.tw, self.span)
 
-    @property
-    def all_asperities(self) -> NDArray[np.int64]:
-        """Index list selecting every asperity."""
-        return np.arange(self.aphi.size, dtype=np.int64)
+    def smooth_args(self) -> tuple:
+        """As :meth:`as_args` with the asperities left out (``span = -1``)."""
+        return (*self.as_args()[:-1], -1.0)
 
     @property
     def min_width(self) -> float:
@@ -104,13 +124,52 @@ class ContourData:
         w = np.concatenate([self.bw, self.aw])
         return float(np.min(w)) if w.size else math.inf
 
+    @property
+    def asperity_height(self) -> float:
+        """Highest asperity [m] (0 without any, or when all are pits)."""
+        return float(max(0.0, np.max(self.ah))) if self.ah.size else 0.0
 
-def contour_data(params: RigParams) -> ContourData:
-    """Build :class:`ContourData` from parameters (bumps and asperities both included)."""
+    @property
+    def asperity_min_width(self) -> float:
+        """Narrowest asperity [rad] (inf without any)."""
+        return float(np.min(self.aw)) if self.aw.size else math.inf
+
+
+def asperity_table(aphi: FloatArray, ah: FloatArray, aw: FloatArray
+                   ) -> tuple[FloatArray, FloatArray, FloatArray, float]:
+    """``(tphi, th, tw, span)`` of :class:`ContourData` from sorted, wrapped asperities."""
+    if aphi.size == 0:
+        return np.array([np.inf]), np.zeros(1), np.ones(1), -1.0
+    tphi = np.concatenate([aphi - 2.0 * np.pi, aphi, aphi + 2.0 * np.pi])
+    order = np.argsort(tphi, kind="stable")
+    return (tphi[order], np.tile(ah, 3)[order], np.tile(aw, 3)[order],
+            float(12.0 * np.max(aw)))
+
+
+def contour_data(params: RigParams, edge: int | None = None) -> ContourData:
+    """Build :class:`ContourData` from parameters.
+
+    Parameters
+    ----------
+    params : RigParams
+        The rig; bumps and asperities both included.
+    edge : int, optional
+        1 (front plate) or 2 (back plate): only the asperities on that edge (and those on
+        both, ``track.asperity_edge`` 0). Default: every asperity.
+    """
     c = params.frame.contour
     t = params.track
-    aphi = np.mod(np.asarray(t.asperity_phi, float), 2.0 * np.pi)
+    sel = np.ones(len(t.asperity_phi), bool)
+    if edge is not None:
+        if edge not in (1, 2):
+            raise ValueError(f"edge must be 1 or 2, got {edge!r}")
+        sel = np.isin(np.asarray(t.asperity_edges(), int), (0, edge))
+    aphi = np.mod(np.asarray(t.asperity_phi, float)[sel], 2.0 * np.pi)
     order = np.argsort(aphi, kind="stable")
+    aphi = aphi[order]
+    ah = np.asarray(t.asperity_height, float)[sel][order]
+    aw = np.asarray(t.asperity_width, float)[sel][order]
+    tphi, th, tw, span = asperity_table(aphi, ah, aw)
     return ContourData(
         rho0=float(c.a),
         orders=np.array([2.0, *[float(k) for k in c.harmonic_orders]]),
@@ -119,18 +178,18 @@ def contour_data(params: RigParams) -> ContourData:
         bphi=np.asarray(t.bump_phi, float),
         bh=np.asarray(t.bump_height, float),
         bw=np.asarray(t.bump_width, float),
-        aphi=aphi[order],
-        ah=np.asarray(t.asperity_height, float)[order],
-        aw=np.asarray(t.asperity_width, float)[order],
+        aphi=aphi, ah=ah, aw=aw, tphi=tphi, th=th, tw=tw, span=span,
     )
 
 
 @njit_inline
-def rho012(phi, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw, aidx, na):  # noqa: ANN001, ANN201
-    """rho, rho', rho'' at a scalar phi: harmonics, every bump, asperities ``aidx[:na]``.
+def rho012(phi, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw, span):  # noqa: ANN001, ANN201
+    """rho, rho', rho'' at a scalar phi: harmonics, every bump, the asperities near phi.
 
     A bump of height h and width w at phi_i adds ``h exp(-x^2 / 2)``, ``x = d / w`` with d
-    the wrapped angle ``phi - phi_i`` (as :func:`bfr_model.geometry.contour_kernel`). Also
+    the wrapped angle ``phi - phi_i`` (as :func:`bfr_model.geometry.contour_kernel`); an
+    asperity of the table ``tphi, th, tw`` the same for ``|x| < 12``, found by a binary
+    search for ``phi mod 2 pi +- span`` (module docstring; ``span < 0``: none). Also
     returns ``sin(phi)``, ``cos(phi)``; integer harmonic orders are evaluated by the
     angle-addition recurrence from them.
     """
@@ -165,31 +224,42 @@ def rho012(phi, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw, aidx, na):
         r0 += g
         r1 -= g * x / w
         r2 += g * (x * x - 1.0) / (w * w)
-    for j in range(na):
-        i = aidx[j]
-        w = aw[i]
-        d = (phi - aphi[i] + math.pi) % (2.0 * math.pi) - math.pi
-        x = d / w
-        if abs(x) < 12.0:
-            g = ah[i] * math.exp(-0.5 * x * x)
-            r0 += g
-            r1 -= g * x / w
-            r2 += g * (x * x - 1.0) / (w * w)
+    if span > 0.0:
+        pw = phi - TWO_PI * math.floor(phi / TWO_PI)
+        n = tphi.shape[0]
+        i = np.searchsorted(tphi, pw - span)
+        top = pw + span
+        while i < n and tphi[i] <= top:
+            w = tw[i]
+            x = (pw - tphi[i]) / w
+            if abs(x) < 12.0:
+                g = th[i] * math.exp(-0.5 * x * x)
+                r0 += g
+                r1 -= g * x / w
+                r2 += g * (x * x - 1.0) / (w * w)
+            i += 1
     return r0, r1, r2, s1, c1
 
 
 @njit_inline
-def contour_point_terms(phi, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw, aidx, na):  # noqa: ANN001, ANN201
+def contour_point_terms(phi, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw, span):  # noqa: ANN001, ANN201
     """delta, delta', delta'' at phi (frame coordinates), as six floats."""
-    r0, r1, r2, s, c = rho012(phi, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw, aidx,
-                              na)
+    r0, r1, r2, s, c = rho012(phi, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw, span)
     return (r0 * s, r0 * c, r1 * s + r0 * c, r1 * c - r0 * s,
             (r2 - r0) * s + 2.0 * r1 * c, (r2 - r0) * c - 2.0 * r1 * s)
 
 
 @njit
 def newton_closest(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin, bphi, bh,  # noqa: ANN001, ANN201
-                   bw, aphi, ah, aw, aidx, na):  # noqa: ANN001
+                   bw, tphi, th, tw, span):  # noqa: ANN001
+    """Local minimiser of ``|delta(phi) - c|`` near phi0 (:func:`newton_inline`, compiled)."""
+    return newton_inline(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin, bphi,
+                         bh, bw, tphi, th, tw, span)
+
+
+@njit_inline
+def newton_inline(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin, bphi, bh,  # noqa: ANN001, ANN201
+                  bw, tphi, th, tw, span):  # noqa: ANN001
     """Local minimiser of ``|delta(phi) - c|`` near phi0 by Newton's method (module doc).
 
     Parameters
@@ -204,6 +274,8 @@ def newton_closest(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin,
         Stop when the Newton step is below tol [rad].
     max_step : float
         Largest step [rad]; where ``f' <= 0`` a descent step of this size is taken.
+    rho0, ..., span
+        The contour (:meth:`ContourData.as_args`).
 
     Returns
     -------
@@ -217,7 +289,7 @@ def newton_closest(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin,
     fp = 1.0
     for it in range(1, maxit + 1):  # noqa: B007 (it is returned)
         dx, dy, d1x, d1y, d2x, d2y = contour_point_terms(phi, rho0, orders, ccos, csin, bphi,
-                                                         bh, bw, aphi, ah, aw, aidx, na)
+                                                         bh, bw, tphi, th, tw, span)
         ex = dx - cx
         ey = dy - cy
         f = ex * d1x + ey * d1y
@@ -234,12 +306,156 @@ def newton_closest(cx, cy, phi0, maxit, tol, max_step, rho0, orders, ccos, csin,
         if abs(step) < tol:
             break
     dx, dy, d1x, d1y, d2x, d2y = contour_point_terms(phi, rho0, orders, ccos, csin, bphi, bh,
-                                                     bw, aphi, ah, aw, aidx, na)
+                                                     bw, tphi, th, tw, span)
     ex = dx - cx
     ey = dy - cy
     f = ex * d1x + ey * d1y
     fp = d1x * d1x + d1y * d1y + ex * d2x + ey * d2y
     return phi, math.sqrt(ex * ex + ey * ey), f, fp, it
+
+
+@njit
+def _f_fp(phi, cx, cy, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw, span):  # noqa: ANN001, ANN202
+    """``(f, f', d)`` at phi: the distance's derivative, its own derivative, the distance."""
+    dx, dy, d1x, d1y, d2x, d2y = contour_point_terms(phi, rho0, orders, ccos, csin, bphi, bh,
+                                                     bw, tphi, th, tw, span)
+    ex = dx - cx
+    ey = dy - cy
+    return (ex * d1x + ey * d1y, d1x * d1x + d1y * d1y + ex * d2x + ey * d2y,
+            math.sqrt(ex * ex + ey * ey))
+
+
+@njit
+def _bracketed_minimum(cx, cy, a, b, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw,  # noqa: ANN001, ANN202
+                       span):  # noqa: ANN001
+    """The local minimum of the distance in [a, b], given ``f(a) < 0 <= f(b)``.
+
+    Newton's iteration kept inside the bracket (bisection where it would leave it or where
+    ``f' <= 0``). Returns ``(phi, d, f')``.
+    """
+    phi = 0.5 * (a + b)
+    fp = 0.0
+    d = 0.0
+    for _ in range(100):
+        f, fp, d = _f_fp(phi, cx, cy, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw,
+                         span)
+        if f < 0.0:
+            a = phi
+        else:
+            b = phi
+        new = phi - f / fp if fp > 0.0 else 0.5 * (a + b)
+        if not a < new < b:
+            new = 0.5 * (a + b)
+        if abs(new - phi) < 1e-14 or b - a < 1e-15:
+            phi = new
+            break
+        phi = new
+    f, fp, d = _f_fp(phi, cx, cy, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw, span)
+    return phi, d, fp
+
+
+@njit
+def local_minima(cx, cy, phi_base, reach, rise, spacing, max_step, rho0, orders, ccos, csin,  # noqa: ANN001, ANN201
+                 bphi, bh, bw, tphi, th, tw, span, out_phi, out_d):  # noqa: ANN001
+    """Every local minimum of the distance from ``c`` to the contour closer than ``reach``.
+
+    Parameters
+    ----------
+    cx, cy : float
+        Ball centre in frame coordinates [m].
+    phi_base : float
+        Guess of the smooth contour's closest point (the previous one) [rad].
+    reach : float
+        Distance within which minima are wanted [m].
+    rise : float
+        Highest asperity [m] (how much closer than the smooth contour the track can come).
+    spacing : float
+        Sample spacing where asperities are [rad] (a quarter of the narrowest).
+    max_step : float
+        Newton's step limit [rad].
+    rho0, ..., span
+        The contour (:meth:`ContourData.as_args`).
+    out_phi, out_d : ndarray
+        Filled with the minima's angles [rad] and distances [m], nearest first.
+
+    Returns
+    -------
+    tuple
+        ``(n, phi_s)``: the number of minima written (at most ``out_phi.size``) and the smooth
+        contour's closest point (the next call's ``phi_base``). With none within reach, the
+        nearest minimum from ``phi_s`` is written (n = 1).
+    """
+    # the smooth contour's closest point
+    phi_s, d_s, _, _, _ = newton_closest(cx, cy, phi_base, 60, 1e-14, max_step, rho0, orders,
+                                         ccos, csin, bphi, bh, bw, tphi, th, tw, -1.0)
+    cap = out_phi.shape[0]
+    n = 0
+    lim = reach + rise
+    if span > 0.0 and d_s < lim:
+        # the window where the smooth contour (less the highest asperity) is within reach
+        step = 4e-3
+        lo = phi_s
+        for _ in range(2000):
+            lo -= step
+            if _f_fp(lo, cx, cy, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw,
+                     -1.0)[2] >= lim:
+                break
+        hi = phi_s
+        for _ in range(2000):
+            hi += step
+            if _f_fp(hi, cx, cy, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw,
+                     -1.0)[2] >= lim:
+                break
+        # any asperity within reach of the window?
+        lw = lo - TWO_PI * math.floor(lo / TWO_PI)
+        i = np.searchsorted(tphi, lw - span)
+        if i < tphi.shape[0] and tphi[i] <= lw + (hi - lo) + span:
+            ns = math.ceil((hi - lo) / spacing)
+            sp = (hi - lo) / ns
+            p_prev = lo
+            f_prev = _f_fp(lo, cx, cy, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw,
+                           span)[0]
+            for k in range(1, ns + 1):
+                p = lo + k * sp
+                f = _f_fp(p, cx, cy, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw,
+                          span)[0]
+                if f_prev < 0.0 <= f:
+                    pm, dm, fpm = _bracketed_minimum(cx, cy, p_prev, p, rho0, orders, ccos,
+                                                     csin, bphi, bh, bw, tphi, th, tw, span)
+                    if fpm > 0.0 and dm < reach:
+                        n = _insert_sorted(out_phi, out_d, n, cap, pm, dm)
+                p_prev = p
+                f_prev = f
+        elif d_s < reach:
+            out_phi[0] = phi_s
+            out_d[0] = d_s
+            n = 1
+    elif span <= 0.0 and d_s < reach:
+        out_phi[0] = phi_s
+        out_d[0] = d_s
+        n = 1
+    if n == 0:
+        phi, d, _, _, _ = newton_closest(cx, cy, phi_s, 200, 1e-14, max_step, rho0, orders,
+                                         ccos, csin, bphi, bh, bw, tphi, th, tw, span)
+        out_phi[0] = phi
+        out_d[0] = d
+        n = 1
+    return n, phi_s
+
+
+@njit_inline
+def _insert_sorted(out_phi, out_d, n, cap, phi, d):  # noqa: ANN001, ANN202
+    """Insert (phi, d) into the first n entries kept sorted by d (at most cap); new n."""
+    if n == cap and d >= out_d[n - 1]:
+        return n
+    j = min(n, cap - 1)
+    while j > 0 and out_d[j - 1] > d:
+        out_phi[j] = out_phi[j - 1]
+        out_d[j] = out_d[j - 1]
+        j -= 1
+    out_phi[j] = phi
+    out_d[j] = d
+    return min(n + 1, cap)
 
 
 def closest_point(data: ContourData, c: ArrayLike, phi0: float | None = None,
@@ -268,28 +484,24 @@ def closest_point(data: ContourData, c: ArrayLike, phi0: float | None = None,
     """
     cx, cy = (float(v) for v in np.asarray(c, float))
     args = data.as_args()
-    idx = data.all_asperities
-    na = idx.size
     w_min = min(data.min_width, 0.5)
     max_step = 0.25 * w_min
     if phi0 is not None:
-        phi, d, _, _, _ = newton_closest(cx, cy, float(phi0), 200, tol, max_step, *args, idx, na)
+        phi, d, _, _, _ = newton_closest(cx, cy, float(phi0), 200, tol, max_step, *args)
         return float(phi), float(d)
     n = n_grid or max(4096, int(4.0 * 2.0 * np.pi / w_min))
     grid = np.linspace(0.0, 2.0 * np.pi, n, endpoint=False)
-    dist = np.array([_dist(g, cx, cy, args, idx, na) for g in grid])
+    dist = np.array([_dist(g, cx, cy, args) for g in grid])
     best = (math.inf, 0.0)
     for i in np.argsort(dist)[:4]:
-        phi, d, _, fp, _ = newton_closest(cx, cy, float(grid[i]), 200, tol, max_step, *args,
-                                          idx, na)
+        phi, d, _, fp, _ = newton_closest(cx, cy, float(grid[i]), 200, tol, max_step, *args)
         if fp > 0.0 and d < best[0]:
             best = (float(d), float(phi))
     return float(np.mod(best[1], 2.0 * np.pi)), best[0]
 
 
-def _dist(phi: float, cx: float, cy: float, args: tuple, idx: NDArray[np.int64],
-          na: int) -> float:
-    r0 = rho012(phi, *args, idx, na)[0]
+def _dist(phi: float, cx: float, cy: float, args: tuple) -> float:
+    r0 = rho012(phi, *args)[0]
     return math.hypot(r0 * math.sin(phi) - cx, r0 * math.cos(phi) - cy)
 
 
@@ -308,8 +520,7 @@ def taylor_closest_point(data: ContourData, c: ArrayLike) -> float:
     """
     cx, cy = (float(v) for v in np.asarray(c, float))
     phi_b = math.atan2(cx, cy)
-    idx = data.all_asperities
-    dx, dy, d1x, d1y, d2x, d2y = contour_point_terms(phi_b, *data.as_args(), idx, idx.size)
+    dx, dy, d1x, d1y, d2x, d2y = contour_point_terms(phi_b, *data.as_args())
     f = (dx - cx) * d1x + (dy - cy) * d1y
     fp = d1x * d1x + d1y * d1y + (dx - cx) * d2x + (dy - cy) * d2y
     return phi_b - f / fp

@@ -1,61 +1,89 @@
-"""Force-based contact model of the ball on the frame (seed chapter 4, recommendation 1).
+"""Force-based contact model of the ball on the frame (seed chapter 4, recommendations 1, 3).
 
-The ball is a free planar body with spin, held to the frame by contact forces, so it can
-bounce, lose contact and slip (seed Fig. 4.1-4.2). In the frame's plane the ball touches
-the two plate edges at the rolling radius R, so it is a disc of radius R on the contour.
+The ball is a free body with spin, held to the frame by contact forces, so it can bounce,
+lose contact and slip (seed Fig. 4.1-4.2). It rests in the groove between two plates d_f
+apart, touching each plate's edge (a copy of the contour at ``z_e = +-d_f/2``); its centre
+is at ``z`` between them. The in-plane distance from the centre to edge e's contour is
+``d_e``, the 3-D distance to the edge ``sqrt(d_e^2 + (z - z_e)^2)``, so edge e touches when
+``d_e < R_e(z) = sqrt(R_b^2 - (z - z_e)^2)`` (at z = 0 the rolling radius R).
+
+*One edge* (``edges=1``, the default when every bump is on both edges): the two identical
+edges act as one contact of the ball's in-plane disc of radius R, z = 0 (today's model).
+*Two edges* (``edges=2``, seed recommendation 3; needed when ``track.asperity_edge`` puts a
+bump on one plate only): each edge has its own contacts, normal forces, friction and stick
+spring, each carrying the share ``s = 1/2`` of the one-edge law, and the ball moves in z.
+With identical edges the two halves sum exactly (bit for bit, each edge summed apart) to
+the one-edge model and z stays 0 (tested).
 
 State (world coordinates, DEVELOPERS.md), ``x`` of length :data:`NX`::
 
     x, y         ball centre [m]                      vx, vy    its velocity [m/s]
     psi          ball spin angle, CCW [rad]           omega     its rate [rad/s]
     theta        frame angle [rad]                    theta_dot its rate [rad/s]
-    xi           stick-spring extension at the primary contact [m]
+    xi           stick-spring extension at the primary contact (edge 0) [m]
     W_in         motor work [J]      W_diss  dissipated energy [J]
-    slip         integral of the slip rate v_slip / R [rad]
+    slip         integral of the slip rate v_slip / R, mean over the edges [rad]
     W_hc         energy dissipated by the Hunt-Crossley damping alone [J]
+    z, vz        lateral position of the centre, +z towards the front plate [m], [m/s]
+    xi2          stick-spring extension at the primary contact of edge 1 [m]
+    wpx, wpy     the ball's angular velocity in the frame's plane (world axes) [rad/s]
 
 Equations of motion (seed eqs. 4.2-4.7, Newton-Euler):
 
-    m r_ddot = sum_j F_j - m g_e y,   J_b psi_ddot = sum_j T_j,
-    J_f theta_ddot = k_u u + T_joint + sum_j T_frame,j
+    m r_ddot = sum_j F_j - m g_e y,   m z_ddot = sum_j F_z,j,   J_b psi_ddot = sum_j T_j,
+    J_b w_p_dot = sum_j (z_e - z) F_t,j n_j,   J_f theta_ddot = k_u u + T_joint + sum_j T_frame,j
 
-Contacts j are the local minima of the distance d from the ball centre to the contour
-(:mod:`bfr_model.closest_point`, exact Newton, warm-started) within reach; several exist at
-the foot of a sharp bump. The penetration is ``w = R + e(beta) - d`` with ``e`` the elliptic
-ball's radius variation (``e0 cos 2 beta``, beta the contact direction in ball coordinates;
-0 for a round ball). Normal force, Hunt and Crossley (seed eq. 4.15 with p = n, q = 1):
+(a sphere: Euler's equations without gyroscopic terms).
 
-    F_n = max(0, k w^n (1 + alpha w_dot)),   w > 0,     n = 3/2
+Contacts j of an edge are the local minima of the distance d from the ball centre to its
+contour (:mod:`bfr_model.closest_point`, exact Newton, warm-started) within reach; several
+exist at the foot of a sharp bump. The penetration is ``w = R_e(z) + e(beta) - d`` with
+``e`` the elliptic ball's radius variation (``e0 cos 2 beta``, beta the contact direction in
+ball coordinates; 0 for a round ball). Normal force, Hunt and Crossley (seed eq. 4.15 with
+p = n, q = 1):
 
-applied as the generalised force ``-F_n grad w`` on (centre, theta, psi). For a round ball
-this is ``F_n n`` on the ball at the contact point and its reaction on the frame; the
-gradient form keeps the elliptic ball's torques consistent. ``grad w`` uses the closest
-point's sensitivity: with ``f' = |delta'|^2 + (delta - c) . delta''`` and
-``kappa = n . delta'' / f'``, ``d alpha = kappa t . dc_f`` (alpha the normal's angle).
+    F_n = max(0, s k w^n (1 + alpha w_dot)),   w > 0,     n = 3/2
 
-Stored elastic energy ``k w^(n+1) / (n+1)``; the damping dissipates
-``(F_n - k w^n) w_dot >= 0`` (both when the force is ``k w^n (1 + alpha w_dot)``, giving
-``alpha k w^n w_dot^2``, and when it is clipped to 0 on fast rebound, ``w_dot < 0``).
+applied as the generalised force ``-F_n grad w`` on (centre, theta, psi, z). For a round
+ball this is ``F_n n`` on the ball at the contact point, its reaction on the frame and the
+lateral push ``F_n (z - z_e) / R_e`` (``dR_e/dz = -(z - z_e) / R_e``); the gradient form keeps
+the elliptic ball's torques consistent. ``grad w`` uses the closest point's sensitivity:
+with ``f' = |delta'|^2 + (delta - c) . delta''`` and ``kappa = n . delta'' / f'``,
+``d alpha = kappa t . dc_f`` (alpha the normal's angle). The in-plane law is the
+linearisation of the 3-D Hertz contact along each edge's normal, inclined by gamma
+(``cos gamma = R_e / R_b``) to the plane: the 3-D penetration is ``w cos gamma`` to first
+order in ``w / R`` (0.2 um in 10 mm), so the geometry is exact and the stiffness is that of
+``params.contact_stiffness`` (k at z = 0; lateral shifts of a few 0.1 mm change cos gamma
+by under 1 %, left out).
 
-Tangential force at the primary contact (the deepest one; replaces the seed's discrete
-eqs. 4.23-4.28): a stick spring-damper, ``trial = k_t xi + c_t v_slip``. The friction
-coefficients in this in-plane law are the edges' ``mu`` times ``R_b / R``: each edge presses
-with N along a line inclined by gamma (``cos gamma = R / R_b``) to the plane, so
-``F_n = 2 N cos gamma`` while the friction available is ``2 mu N`` (the wedge effect of the
-groove). Stick while ``|trial| <= mu_s F_n`` (``F_t = -trial``, ``xi_dot = v_slip``);
-otherwise slide with
-``F_t = -mu_d F_n sgn(trial)``, the spring frozen while loading (``xi_dot = 0``) and
+Stored elastic energy ``s k w^(n+1) / (n+1)``; the damping dissipates
+``(F_n - s k w^n) w_dot >= 0`` (both when the force is ``s k w^n (1 + alpha w_dot)``, giving
+``alpha s k w^n w_dot^2``, and when it is clipped to 0 on fast rebound, ``w_dot < 0``).
+
+Tangential force at each edge's primary contact (its deepest one; replaces the seed's
+discrete eqs. 4.23-4.28): a stick spring-damper, ``trial = s (k_t xi + c_t v_slip)``. The
+friction coefficients in this in-plane law are the edges' ``mu`` times ``R_b / R_e``: each
+edge presses with N along a line inclined by gamma to the plane, so its in-plane force is
+``N cos gamma`` while the friction available is ``mu N`` (the wedge effect of the groove).
+Stick while ``|trial| <= mu_s F_n`` (``F_t = -trial``, ``xi_dot = v_slip``); otherwise slide
+with ``F_t = -mu_d F_n sgn(trial)``, the spring frozen while loading (``xi_dot = 0``) and
 following the slip while unloading (``xi_dot = v_slip`` when ``xi v_slip < 0``). That rule
-makes the dissipation ``-F_t v_slip - k_t xi xi_dot`` non-negative in every case; after each
-step a sliding spring is reset to ``mu_d F_n / k_t`` (and a lost contact's to 0), booking
-the released spring energy as dissipated. Secondary contacts (brief, at bump feet) use
-regularised Coulomb friction ``-mu_d F_n tanh(v_slip / v_reg)``. The slip velocity of the
-contact point (ball material point minus frame material point, along the tangent t) is
+makes the dissipation ``-F_t v_slip - s k_t xi xi_dot`` non-negative in every case; after
+each step a sliding spring is reset to ``mu_d F_n / (s k_t)`` (and a lost contact's to 0),
+booking the released spring energy as dissipated. Secondary contacts (brief, at bump feet)
+use regularised Coulomb friction ``-mu_d F_n tanh(v_slip / v_reg)``. The slip velocity of
+the contact point (ball material point minus frame material point, along the tangent t) is
 
-    v_slip = t . v + omega R_j - theta_dot (c_pt x t)_z,   R_j = R + e,  c_pt = c - R_j n
+    v_slip = t . v + omega R_j - theta_dot (c_pt x t)_z + (z_e - z) w_p . n,
+    R_j = R_e + e,  c_pt = c - R_j n
 
 so that rolling without slip is ``omega = theta_dot - s_dot / R`` (DEVELOPERS.md). The
-force ``F_t t`` acts on the ball, ``R_j F_t`` on its spin, ``-(c_pt x F_t t)_z`` on the frame.
+force ``F_t t`` acts on the ball, ``R_j F_t`` on its spin, ``(z_e - z) F_t n`` on its
+rotation about the contact normal (yaw, w_p . n), ``-(c_pt x F_t t)_z`` on the frame. The
+yaw is what lets the ball roll on two edges at different radii (one raised by a bump:
+``R_1 - R_2 = (d_f / R) z`` to first order) without slipping on either; with identical edges
+the two yaw torques cancel exactly. Friction across the edges (along z) is not modelled:
+the ball slides sideways freely, held by the normal forces' lateral components.
 
 Rolling resistance: a couple ``-mu_rol F_n R_j tanh(omega_rel / v_r)`` on the ball and its
 reaction on the frame (``omega_rel = omega - theta_dot``; power ``mu_rol F_n |s_dot|`` as the
@@ -63,17 +91,41 @@ rigid model's). Joint friction as the rigid model's, with
 ``F_load = |sum_j F_j + m_f g_e y|`` explicit here.
 
 Energy balance, checked by the tests: ``E_kin + E_pot + E_el - E(0) = W_in - W_diss`` with
-``E_el = sum_j k w_j^(n+1) / (n+1) + k_t xi^2 / 2``.
+``E_kin`` including ``m vz^2 / 2 + J_b |w_p|^2 / 2`` and
+``E_el = sum_j s k w_j^(n+1) / (n+1) + sum_e s k_t xi_e^2 / 2``.
 
-Integration: the contact modes are near 1.5 kHz (Hertz stiffness at the ball's weight) and
-the stick spring near 1.4 kHz; a compiled fixed-step RK4 at ``contact.time_step`` (2e-5 s,
-about 30 steps per contact period) resolves them with an energy error far below the
-physical dissipation, at several times real time (``bfr analyze bounce`` reports the
-factor). :meth:`ContactModel.rhs` also works with scipy's implicit solvers for checks.
+Integration (:func:`contact_steps`): the contact modes are near 1.5 kHz (Hertz stiffness
+at the ball's weight, 3 kHz in a 0.1 m/s impact) and the stick spring near 1.4 kHz; a
+compiled RK4 at ``contact.time_step`` (2e-5 s, about 30 steps per contact period, 8 per
+impact) resolves them with an energy error far below the physical dissipation. Three
+methods make it fast where the ball bounces over rows of sharp bumps (``bfr bench``,
+docs/notes/issue-16.md):
+
+- *Compiled closest point*: each edge's asperities in a sorted table, the few within 12
+  widths of a point found by binary search (:func:`bfr_model.closest_point.rho012`); the
+  search for contacts samples ``f`` in the window within reach
+  (:func:`bfr_model.closest_point.local_minima`).
+- *Event-based contact set*: any point's distance to the centre changes by at most the
+  centre's travel relative to the frame, bounded over a step H by ``v H + a H^2 / 2``
+  (:func:`_travel_rate`). So the set is searched anew only after the ball has travelled
+  ``M / 2`` (reach margin M = 0.4 mm: the minima within ``R_e + |e0| + M``), a secondary
+  candidate is re-solved only when its gap bound comes within 4 steps' travel, and it is
+  evaluated in a step only if its gap bound is within that step's travel (otherwise its
+  force is zero throughout: leaving it out changes nothing). Each edge's primary is its
+  deepest candidate, re-ranked at every step.
+- *Free flight*: with no stick spring loaded and every gap bound more than twice the
+  travel, ``k`` steps are taken at once (at most ``contact.max_flight_step``, whole
+  multiples of the step, so contacts still begin on the step grid); in flight the ball is
+  ballistic (RK4 is exact for it) and the frame's motion smooth.
+
+``exhaustive=True`` searches and evaluates every candidate at every step with no flight
+steps: the reference, which the event-based stepping matches to 1e-12 m/s per 1 ms over
+the bump row (tests). :meth:`ContactModel.rhs` also works with scipy's implicit solvers
+for checks (:meth:`ContactModel.follow` keeps the contact set with the state).
 
 Not modelled: the wobbling frame (``frame.wobble``; the contact model is planar, a shaft
-pitch is the in-plane gravity ``g cos eps``), and the two edges' individual contacts (they
-act together, seed recommendation 3).
+pitch is the in-plane gravity ``g cos eps``, its lateral component ``g sin eps`` is left
+out), friction across the edges, the elliptic ball's orientation beyond its spin angle.
 """
 
 from __future__ import annotations
@@ -92,7 +144,9 @@ from bfr_model.closest_point import (
     closest_point,
     contour_data,
     contour_point_terms,
+    local_minima,
     newton_closest,
+    newton_inline,
 )
 from bfr_model.dynamics import RigidModel, curve_terms, rigid_terms
 from bfr_model.geometry import OffsetCurve
@@ -103,7 +157,9 @@ from bfr_model.layout import (
     I_CV,
     I_DAMP,
     I_EL,
+    I_EXH,
     I_G,
+    I_HFLY,
     I_JB,
     I_JF,
     I_K,
@@ -119,42 +175,64 @@ from bfr_model.layout import (
     I_NEXP,
     I_PEXP,
     I_R,
+    I_RB,
     I_TC,
     I_VC,
     I_VR,
     I_VREG,
+    I_ZE,
     rigid_vector,
     with_contact,
 )
 from bfr_model.params import RigParams
 
-__all__ = ["NX", "ContactModel", "ContactResult", "contact_eval", "contact_steps"]
+__all__ = ["NX", "ContactModel", "ContactResult", "contact_eval", "contact_steps",
+           "elastic_energy", "resolve_contacts", "search_contacts", "update_contacts"]
 
 FloatArray = NDArray[np.float64]
 
-# state layout
-IX, IY, IPSI, ITH, IVX, IVY, IOM, ITHD, IXI, IWIN, IWD, ISLIP, IWHC = range(13)
-NX = 13
+# state layout (module docstring)
+IX, IY, IPSI, ITH, IVX, IVY, IOM, ITHD, IXI, IWIN, IWD, ISLIP, IWHC, IZ, IVZ, IXI2 = range(16)
+IWPX, IWPY = 16, 17
+NX = 18
 # parameter vector: the shared layout of bfr_model.layout (rigid entries + contact block)
-NCMAX = 8  # at most this many simultaneous contact candidates
-# diagnostics layout (contact_eval's diag output)
+NCMAX = 8  # at most this many simultaneous contact candidates per edge
+# diagnostics layout (contact_eval's diag output); D_E* + e: the primary contact of edge e
 D_FN, D_FN0, D_W0, D_VSLIP, D_NTOUCH, D_FT0, D_PHI0, D_D0, D_EEL = range(9)
-D_SIZE = 9
+D_EFN, D_EVS, D_EW, D_EFT = 9, 11, 13, 15
+D_SIZE = 17
+RESOLVE_GAP = 1e-7  # [m] candidates this close to touching (beyond the travel) are re-solved
+SWAP_DEPTH = 1e-7  # [m] a secondary contact this much deeper than the primary takes its place
 
 
 @njit_inline
-def _candidate_geometry(j, x, cand, CP, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,  # noqa: ANN001, ANN202
-                        aidx, na, iters):  # noqa: ANN001
-    """Refine candidate j by Newton and return its contact geometry (world frame)."""
-    th = x[ITH]
-    st = math.sin(th)
-    ct = math.cos(th)
+def _edge_frame(E, e, z, CP):  # noqa: ANN001, ANN202
+    """Force share s, in-plane radius R_e(z), dR_e/dz and lateral arm ``z_e - z`` of edge e.
+
+    One edge (E = 1) is today's contact: the two identical edges acting together, s = 1,
+    R_e = R, no arm. With two, edge 0 is the front plate (z_e = +d_f/2), edge 1 the back one
+    (module docstring).
+    """
+    if E == 1:
+        return 1.0, CP[I_R], 0.0, 0.0
+    ze = CP[I_ZE] if e == 0 else -CP[I_ZE]
+    dz = z - ze
+    re = math.sqrt(CP[I_RB] * CP[I_RB] - dz * dz)
+    return 0.5, re, -dz / re, -dz
+
+
+@njit_inline
+def _candidate_geometry(phi, x, CP, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th, tw,  # noqa: ANN001, ANN202
+                        span, iters):  # noqa: ANN001
+    """Refine a candidate's contour angle by Newton; its contact geometry (frame coords)."""
+    th_ = x[ITH]
+    st = math.sin(th_)
+    ct = math.cos(th_)
     cxf = ct * x[IX] + st * x[IY]
     cyf = -st * x[IX] + ct * x[IY]
     ms = CP[I_MAXSTEP]
-    phi = cand[j]
     dx, dy, d1x, d1y, d2x, d2y = contour_point_terms(phi, rho0, orders, ccos, csin, bphi, bh,
-                                                     bw, aphi, ah, aw, aidx, na)
+                                                     bw, tphi, th, tw, span)
     fp = 1.0
     for _ in range(iters):  # Newton from the step's solution (module closest_point)
         ex = dx - cxf
@@ -165,96 +243,158 @@ def _candidate_geometry(j, x, cand, CP, rho0, orders, ccos, csin, bphi, bh, bw, 
         step = min(max(step, -ms), ms)
         phi -= step
         dx, dy, d1x, d1y, d2x, d2y = contour_point_terms(phi, rho0, orders, ccos, csin, bphi,
-                                                         bh, bw, aphi, ah, aw, aidx, na)
+                                                         bh, bw, tphi, th, tw, span)
     ex = dx - cxf
     ey = dy - cyf
     fp = d1x * d1x + d1y * d1y + ex * d2x + ey * d2y
     d = math.sqrt(ex * ex + ey * ey)
     nfx = -ex / d
     nfy = -ey / d
+    kap = (nfx * d2x + nfy * d2y) / fp
+    return phi, d, cxf, cyf, nfx, nfy, kap, st, ct
+
+
+@njit_inline
+def _penetration(x, CP, Re, dRe, d, cxf, cyf, nfx, nfy, kap, st, ct):  # noqa: ANN001, ANN202
+    """w, the contact radius R_j, world normal/tangent, contact point, grad w.
+
+    ``w = R_e(z) + e(beta) - d``; its gradient on (centre, theta, psi, z) uses the closest
+    point's sensitivity (module docstring): ``d alpha = kappa t . dc_f``.
+    """
     tfx = nfy
     tfy = -nfx
-    kap = (nfx * d2x + nfy * d2y) / fp
-    return phi, d, cxf, cyf, nfx, nfy, tfx, tfy, kap, st, ct
-
-
-@njit
-def contact_eval(x, u, CP, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,  # noqa: ANN001, ANN201
-                 aidx, na, iters, diag, dxv):  # noqa: ANN001
-    """Time derivative of the state into ``dxv`` (module docstring); fills ``diag``.
-
-    ``cand[:ncand]`` are the contact candidates' contour angles (``cand[0]`` the primary),
-    refined here by ``iters`` Newton iterations each (from the step's exact solution: two
-    iterations reach 1e-15 rad, the step moving phi by about 1e-4 rad).
-    """
-    m = CP[I_M]
-    R = CP[I_R]
-    g = CP[I_G]
-    k = CP[I_K]
-    nexp = CP[I_NEXP]
+    nx = ct * nfx - st * nfy
+    ny = st * nfx + ct * nfy
+    tx = ny
+    ty = -nx
+    e = 0.0
+    e1 = 0.0
     e0 = CP[I_EL]
+    if e0 != 0.0:  # elliptic ball: e(beta), beta = (angle of -n) - psi
+        beta = math.atan2(-ny, -nx) - x[IPSI]
+        e = e0 * math.cos(2.0 * beta)
+        e1 = -2.0 * e0 * math.sin(2.0 * beta)
+    rj = Re + e
+    w = rj - d
+    cpx = x[IX] - rj * nx
+    cpy = x[IY] - rj * ny
+    njc = nfx * (-cyf) + nfy * cxf
+    tjc = tfx * (-cyf) + tfy * cxf
+    gcx = -nx + e1 * kap * tx
+    gcy = -ny + e1 * kap * ty
+    gth = njc + e1 * (1.0 - kap * tjc)
+    return w, rj, tx, ty, cpx, cpy, gcx, gcy, gth, -e1, dRe
+
+
+@njit_inline
+def _tangential(x, CP, ixi, s, mus, mud, fn, v_slip, primary):  # noqa: ANN001, ANN202
+    """Tangential force ``F_t``, the stick spring's rate and the friction's dissipation.
+
+    Primary contact: the stick spring-damper (share s of k_t, c_t), sliding at ``mu_d F_n``
+    (module docstring); secondary ones: regularised Coulomb friction.
+    """
+    if primary:
+        trial = s * (CP[I_KT] * x[ixi] + CP[I_CT] * v_slip)
+        if abs(trial) <= mus * fn:
+            ft = -trial
+            xid = v_slip
+        else:
+            ft = -mud * fn if trial > 0.0 else mud * fn
+            xid = v_slip if x[ixi] * v_slip < 0.0 else 0.0
+        return ft, xid, -ft * v_slip - s * CP[I_KT] * x[ixi] * xid
+    ft = -mud * fn * math.tanh(v_slip / CP[I_VREG])
+    return ft, 0.0, -ft * v_slip
+
+
+@njit_inline
+def _powers(w, n, p):  # noqa: ANN001, ANN202
+    """``(w^n, w^p)`` for w > 0, by square roots for Hertz's n = 3/2 and p = 1/4 or 3/2."""
+    r = math.sqrt(w)
+    wn = w * r if n == 1.5 else w ** n
+    if p == 0.25:
+        wp = math.sqrt(r)
+    elif p == n:
+        wp = wn
+    else:
+        wp = w ** p
+    return wn, wp
+
+
+@njit_inline
+def _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, bphi, bh, bw,  # noqa: ANN001, ANN202
+               tphi, th, tw, span, iters, diag):  # noqa: ANN001
+    """One edge's contacts: their sums of forces, torques, powers and energies.
+
+    Returns ``(fx, fy, fz, tb, tf, tpx, tpy, diss, diss_hc, fn_tot, ntouch, e_el, slip,
+    xi_dot)``: force on the ball [N], torques on the ball (about z, and in the plane: the
+    yaw about the contact normals) and on the frame [N m], dissipated powers (all, and the
+    normal damping's) [W], normal force [N], touching contacts, elastic energy [J], the
+    primary's slip rate ``v_slip / R_j`` [rad/s] and its stick spring's rate [m/s]. Summed
+    per edge, so that two identical edges (each term an exact half) give exactly the sums
+    of one (their yaw torques cancel exactly).
+    """
     vx = x[IVX]
     vy = x[IVY]
     om = x[IOM]
     thd = x[ITHD]
+    k = CP[I_K]
+    nexp = CP[I_NEXP]
+    s, Re, dRe, arm = _edge_frame(E, e, x[IZ], CP)
+    ixi = IXI if e == 0 else IXI2
+    ratio = 1.0 if E == 1 else CP[I_R] / Re  # in-plane friction mu R_b / R_e(z)
+    mus = CP[I_MUS] * ratio
+    mud = CP[I_MUD] * ratio
     fx = 0.0
     fy = 0.0
+    fz = 0.0
     tb = 0.0
     tf = 0.0
+    tpx = 0.0
+    tpy = 0.0
     diss = 0.0
     diss_hc = 0.0
-    xi_dot = 0.0
-    slip_rate = 0.0
     fn_tot = 0.0
     ntouch = 0.0
-    e_el = 0.5 * CP[I_KT] * x[IXI] * x[IXI]
-    for j in range(ncand):
-        phi, d, cxf, cyf, nfx, nfy, tfx, tfy, kap, st, ct = _candidate_geometry(
-            j, x, cand, CP, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw, aidx, na,
-            iters)
-        # world normal and tangent
-        nx = ct * nfx - st * nfy
-        ny = st * nfx + ct * nfy
-        tx = ny
-        ty = -nx
-        # elliptic ball: e(beta), beta = (angle of -n) - psi
-        e = 0.0
-        e1 = 0.0
-        if e0 != 0.0:
-            beta = math.atan2(-ny, -nx) - x[IPSI]
-            e = e0 * math.cos(2.0 * beta)
-            e1 = -2.0 * e0 * math.sin(2.0 * beta)
-        Rj = R + e
-        w = Rj - d
-        # contact point and slip velocity
-        cpx = x[IX] - Rj * nx
-        cpy = x[IY] - Rj * ny
-        v_slip = tx * vx + ty * vy + om * Rj - thd * (cpx * ty - cpy * tx)
+    slip = 0.0
+    xid0 = 0.0
+    e_el = 0.5 * s * CP[I_KT] * x[ixi] * x[ixi]
+    diag[D_EFN + e] = 0.0
+    diag[D_EFT + e] = 0.0
+    tp = tphi[e]
+    tt = th[e]
+    tv = tw[e]
+    sp = span[e]
+    for j in range(ncand[e]):
+        if j > 0 and not allc and cact[e, j] == 0:
+            continue
+        phi, d, cxf, cyf, nfx, nfy, kap, st, ct = _candidate_geometry(
+            cand[e, j], x, CP, rho0, orders, ccos, csin, bphi, bh, bw, tp, tt, tv, sp, iters)
+        w, rj, tx, ty, cpx, cpy, gcx, gcy, gth, gps, gz = _penetration(
+            x, CP, Re, dRe, d, cxf, cyf, nfx, nfy, kap, st, ct)
+        # slip velocity: ball material point minus frame material point, along t (the yaw
+        # about the normal n = (-t_y, t_x) moves a contact off the mid-plane along t)
+        v_slip = (tx * vx + ty * vy + om * rj - thd * (cpx * ty - cpy * tx)
+                  + arm * (tx * x[IWPY] - ty * x[IWPX]))
         if j == 0:
-            slip_rate = v_slip / Rj
-            diag[D_W0] = w
-            diag[D_VSLIP] = v_slip
-            diag[D_PHI0] = phi
-            diag[D_D0] = d
-            diag[D_FN0] = 0.0
-            diag[D_FT0] = 0.0
+            slip = v_slip / rj
+            diag[D_EW + e] = w
+            diag[D_EVS + e] = v_slip
+            if e == 0:
+                diag[D_PHI0] = phi
+                diag[D_D0] = d
         if w <= 0.0:
             continue
-        # gradient of w: d/dc (world), d/dtheta, d/dpsi
-        njc = nfx * (-cyf) + nfy * cxf
-        tjc = tfx * (-cyf) + tfy * cxf
-        gcx = -nx + e1 * kap * tx
-        gcy = -ny + e1 * kap * ty
-        gth = njc + e1 * (1.0 - kap * tjc)
-        gps = -e1
-        wdot = gcx * vx + gcy * vy + gth * thd + gps * om
-        kw = k * w ** nexp
-        fn = kw + CP[I_DAMP] * w ** CP[I_PEXP] * wdot
+        # normal force (Hunt-Crossley family), applied as -F_n grad w
+        wdot = gcx * vx + gcy * vy + gth * thd + gps * om + gz * x[IVZ]
+        wn, wp = _powers(w, nexp, CP[I_PEXP])
+        kw = s * k * wn
+        fn = kw + s * CP[I_DAMP] * wp * wdot
         if fn < 0.0:
             fn = 0.0
-        e_el += k * w ** (nexp + 1.0) / (nexp + 1.0)
+        e_el += s * k * (wn * w) / (nexp + 1.0)
         fx -= fn * gcx
         fy -= fn * gcy
+        fz -= fn * gz
         tf -= fn * gth
         tb -= fn * gps
         dh = (fn - kw) * wdot
@@ -262,31 +402,69 @@ def contact_eval(x, u, CP, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw, 
         diss += dh
         fn_tot += fn
         ntouch += 1.0
-        # tangential force
+        ft, xid, dfr = _tangential(x, CP, ixi, s, mus, mud, fn, v_slip, j == 0)
+        diss += dfr
         if j == 0:
-            trial = CP[I_KT] * x[IXI] + CP[I_CT] * v_slip
-            if abs(trial) <= CP[I_MUS] * fn:
-                ft = -trial
-                xi_dot = v_slip
-            else:
-                ft = -CP[I_MUD] * fn if trial > 0.0 else CP[I_MUD] * fn
-                xi_dot = v_slip if x[IXI] * v_slip < 0.0 else 0.0
-            diss += -ft * v_slip - CP[I_KT] * x[IXI] * xi_dot
-            diag[D_FN0] = fn
-            diag[D_FT0] = ft
-        else:
-            ft = -CP[I_MUD] * fn * math.tanh(v_slip / CP[I_VREG])
-            diss += -ft * v_slip
+            xid0 = xid
+            diag[D_EFN + e] = fn
+            diag[D_EFT + e] = ft
         fx += ft * tx
         fy += ft * ty
-        tb += Rj * ft
+        tb += rj * ft
+        tpx -= arm * ft * ty
+        tpy += arm * ft * tx
         tf -= ft * (cpx * ty - cpy * tx)
         # rolling resistance couple
         om_rel = om - thd
-        mr = -CP[I_MUR] * fn * Rj * math.tanh(om_rel / CP[I_VR])
+        mr = -CP[I_MUR] * fn * rj * math.tanh(om_rel / CP[I_VR])
         tb += mr
         tf -= mr
         diss -= mr * om_rel
+    return fx, fy, fz, tb, tf, tpx, tpy, diss, diss_hc, fn_tot, ntouch, e_el, slip, xid0
+
+
+@njit
+def contact_eval(x, u, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, bphi, bh, bw,  # noqa: ANN001, ANN201
+                 tphi, th, tw, span, iters, diag, dxv):  # noqa: ANN001
+    """Time derivative of the state into ``dxv`` (:func:`_rhs`, compiled on its own)."""
+    return _rhs(x, u, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, bphi, bh, bw,
+                tphi, th, tw, span, iters, diag, dxv)
+
+
+@njit_inline
+def _rhs(x, u, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin, bphi, bh, bw,  # noqa: ANN001, ANN202
+         tphi, th, tw, span, iters, diag, dxv):  # noqa: ANN001
+    """Time derivative of the state into ``dxv`` (module docstring); fills ``diag``.
+
+    ``cand[e, :ncand[e]]`` are edge e's contact candidates (``cand[e, 0]`` its primary),
+    refined here by ``iters`` Newton iterations each (from the step's exact solution: two
+    reach 1e-15 rad). Secondary candidates with ``cact[e, j] == 0`` are left out unless
+    ``allc``: the stepper clears the flag only where the contact cannot begin within the
+    step (their force is zero throughout), so leaving them out changes nothing.
+    """
+    m = CP[I_M]
+    g = CP[I_G]
+    thd = x[ITHD]
+    fx = fy = fz = tb = tf = tpx = tpy = diss = diss_hc = fn_tot = ntouch = e_el = slip = 0.0
+    dxv[IXI2] = 0.0
+    for e in range(E):
+        (pfx, pfy, pfz, ptb, ptf, ptpx, ptpy, pdiss, pdhc, pfn, pnt, peel, pslip,
+         xid) = _edge_sums(e, x, CP, E, cand, ncand, cact, allc, rho0, orders, ccos, csin,
+                           bphi, bh, bw, tphi, th, tw, span, iters, diag)
+        fx += pfx
+        fy += pfy
+        fz += pfz
+        tb += ptb
+        tf += ptf
+        tpx += ptpx
+        tpy += ptpy
+        diss += pdiss
+        diss_hc += pdhc
+        fn_tot += pfn
+        ntouch += pnt
+        e_el += peel
+        slip += pslip
+        dxv[IXI if e == 0 else IXI2] = xid
     # joint friction (bearing load: contact force on the ball plus the frame's weight)
     lx = fx
     ly = fy + CP[I_MF] * g
@@ -294,23 +472,61 @@ def contact_eval(x, u, CP, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw, 
     sg = math.tanh(thd / CP[I_VC])
     tj = -(CP[I_CV] * thd + (CP[I_TC] + CP[I_CL] * f_load) * sg)
     diss -= tj * thd
-    dxv[IX] = vx
-    dxv[IY] = vy
-    dxv[IPSI] = om
+    dxv[IX] = x[IVX]
+    dxv[IY] = x[IVY]
+    dxv[IPSI] = x[IOM]
     dxv[ITH] = thd
     dxv[IVX] = fx / m
     dxv[IVY] = fy / m - g
     dxv[IOM] = tb / CP[I_JB]
     dxv[ITHD] = (CP[I_KU] * u + tj + tf) / CP[I_JF]
-    dxv[IXI] = xi_dot
     dxv[IWIN] = CP[I_KU] * u * thd
     dxv[IWD] = diss
-    dxv[ISLIP] = slip_rate
+    dxv[ISLIP] = slip / E
     dxv[IWHC] = diss_hc
+    dxv[IZ] = x[IVZ]
+    dxv[IVZ] = fz / m
+    dxv[IWPX] = tpx / CP[I_JB]
+    dxv[IWPY] = tpy / CP[I_JB]
+    # diagnostics: totals, the deepest primary, the primaries' mean slip and sums
     diag[D_FN] = fn_tot
     diag[D_NTOUCH] = ntouch
     diag[D_EEL] = e_el
+    diag[D_W0] = diag[D_EW]
+    diag[D_VSLIP] = diag[D_EVS]
+    diag[D_FN0] = diag[D_EFN]
+    diag[D_FT0] = diag[D_EFT]
+    if E == 2:
+        diag[D_W0] = max(diag[D_EW], diag[D_EW + 1])
+        diag[D_VSLIP] = 0.5 * (diag[D_EVS] + diag[D_EVS + 1])
+        diag[D_FN0] += diag[D_EFN + 1]
+        diag[D_FT0] += diag[D_EFT + 1]
     return dxv
+
+
+@njit
+def elastic_energy(x, CP, E, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw, tphi, th,  # noqa: ANN001, ANN201
+                   tw, span, iters):  # noqa: ANN001
+    """``E_el`` [J] of the contact set at x (the sums of :func:`_edge_sums`, in its order).
+
+    Every candidate's ``s k w^(n+1) / (n+1)`` and the stick springs' ``s k_t xi^2 / 2``.
+    """
+    total = 0.0
+    nexp = CP[I_NEXP]
+    for e in range(E):
+        s, Re, dRe, _ = _edge_frame(E, e, x[IZ], CP)
+        ixi = IXI if e == 0 else IXI2
+        e_el = 0.5 * s * CP[I_KT] * x[ixi] * x[ixi]
+        for j in range(ncand[e]):
+            _, d, cxf, cyf, nfx, nfy, kap, st, ct = _candidate_geometry(
+                cand[e, j], x, CP, rho0, orders, ccos, csin, bphi, bh, bw, tphi[e], th[e],
+                tw[e], span[e], iters)
+            w = _penetration(x, CP, Re, dRe, d, cxf, cyf, nfx, nfy, kap, st, ct)[0]
+            if w > 0.0:
+                wn = _powers(w, nexp, CP[I_PEXP])[0]
+                e_el += s * CP[I_K] * (wn * w) / (nexp + 1.0)
+        total += e_el
+    return total
 
 
 @njit
@@ -318,211 +534,296 @@ def _wrap(a):  # noqa: ANN001, ANN202
     return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@njit
-def update_candidates(x, CP, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah,  # noqa: ANN001, ANN202
-                      aw, aidx, na, diag, dxv, full):  # noqa: ANN001
-    """Re-solve the contact candidates at state x, add new ones at nearby asperities.
+@njit_inline
+def _frame_centre(x):  # noqa: ANN001, ANN202
+    """Ball centre in frame coordinates [m]."""
+    st = math.sin(x[ITH])
+    ct = math.cos(x[ITH])
+    return ct * x[IX] + st * x[IY], -st * x[IX] + ct * x[IY]
 
-    Keeps the local minima of the distance within reach (``d < R + e0 + margin``; at least
-    the closest one), the deepest as ``cand[0]`` (the primary). Updates the local asperity
-    list ``aidx[:na[0]]``. Returns the elastic energy removed by a change of the contact set
-    at fixed state (booked as dissipation by the caller): the primary's stick spring when
-    the primary moves to another local minimum, and contacts that disappear. Without
-    asperities and with a single candidate, or unless ``full``, it only re-solves the
-    existing candidates exactly (warm-started Newton); the search for new contacts runs
-    when ``full`` (every few steps: a new contact enters the reach margin of 1 mm long
-    before it can touch).
+
+@njit
+def search_contacts(x, CP, E, cand, ncand, cslack, cbase, rho0, orders, ccos, csin, bphi, bh,  # noqa: ANN001, ANN201
+                    bw, tphi, th, tw, span, hmax, aspc):  # noqa: ANN001
+    """The contact set at x, searched anew.
+
+    Every local minimum of each edge's distance within ``R_e + |e0| + M``
+    (:func:`bfr_model.closest_point.local_minima`), deepest first; ``cslack`` their gaps
+    ``d - R_e - |e0|`` [m].
     """
-    R = CP[I_R]
-    reach = R + abs(CP[I_EL]) + CP[I_MARGIN]
-    n_old = ncand[0]
-    th = x[ITH]
-    cxf = math.cos(th) * x[IX] + math.sin(th) * x[IY]
-    cyf = -math.sin(th) * x[IX] + math.cos(th) * x[IY]
+    cxf, cyf = _frame_centre(x)
+    e0 = abs(CP[I_EL])
+    dist = np.empty(NCMAX)
+    for e in range(E):
+        _, Re, _, _ = _edge_frame(E, e, x[IZ], CP)
+        n, pb = local_minima(cxf, cyf, cbase[e], Re + e0 + CP[I_MARGIN], hmax[e], aspc[e],
+                             CP[I_MAXSTEP], rho0, orders, ccos, csin, bphi, bh, bw, tphi[e],
+                             th[e], tw[e], span[e], cand[e], dist)
+        cbase[e] = pb
+        ncand[e] = n
+        for j in range(n):
+            cslack[e, j] = dist[j] - Re - e0
+
+
+@njit_inline
+def resolve_contacts(x, CP, E, cand, ncand, cslack, travel, rho0, orders, ccos, csin, bphi,  # noqa: ANN001, ANN201
+                     bh, bw, tphi, th, tw, span):  # noqa: ANN001
+    """Re-solve the candidates that may be needed (warm-started Newton).
+
+    Each edge's primary, and every other one whose gap bound ``cslack`` is below
+    ``4 travel + RESOLVE_GAP`` (``travel < 0``: all). Returns False if one lost its minimum
+    or two met (then the set is searched anew).
+    """
+    cxf, cyf = _frame_centre(x)
+    e0 = abs(CP[I_EL])
     ms = CP[I_MAXSTEP]
-    nasp = aphi.shape[0]
-    if (nasp == 0 and n_old == 1) or not full:
-        ok = True
-        ref = np.empty(n_old)
-        for j in range(n_old):
-            phi, _, f, fp, _ = newton_closest(cxf, cyf, cand[j], 8, 1e-14, ms, rho0, orders,
-                                              ccos, csin, bphi, bh, bw, aphi, ah, aw, aidx,
-                                              na[0])
-            ref[j] = phi
-            ok = ok and fp > 0.0 and abs(f / fp) < 1e-12
-        for a in range(n_old):  # two candidates on one minimum would count it twice
+    for e in range(E):
+        _, Re, _, _ = _edge_frame(E, e, x[IZ], CP)
+        for j in range(ncand[e]):
+            if j > 0 and travel >= 0.0 and cslack[e, j] > 4.0 * travel + RESOLVE_GAP:
+                continue
+            phi, d, f, fp, _ = newton_inline(cxf, cyf, cand[e, j], 8, 1e-14, ms, rho0, orders,
+                                             ccos, csin, bphi, bh, bw, tphi[e], th[e], tw[e],
+                                             span[e])
+            if not (fp > 0.0 and abs(f / fp) < 1e-12):
+                return False
+            cand[e, j] = phi
+            cslack[e, j] = d - Re - e0
+        for a in range(ncand[e]):  # two candidates on one minimum would count it twice
             for b in range(a):
-                if abs(_wrap(ref[a] - ref[b])) < 1e-7:
-                    ok = False
-        if ok or nasp == 0:
-            for j in range(n_old):
-                cand[j] = ref[j]
-            return 0.0
-    # elastic energy of the contact set the last step integrated (as its stages evaluate it)
-    contact_eval(x, 0.0, CP, cand, n_old, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,
-                 aidx, na[0], 2, diag, dxv)
-    e_old = diag[D_EEL]
-    # local asperity list around the primary
-    half = 0.0
-    if nasp > 0:
-        rb = math.sqrt(cxf * cxf + cyf * cyf)
-        half = 1.5 * (reach + 2e-3) / max(rb - reach, 1e-3)
-        cnt = 0
-        p0 = cand[0]
-        for i in range(nasp):
-            if abs(_wrap(aphi[i] - p0)) < half + 12.0 * aw[i]:
-                aidx[cnt] = i
-                cnt += 1
-        na[0] = cnt
-    # re-solve the old candidates (warm start), then seeds at nearby asperities
-    nbuf = NCMAX + 3 + 3 * max(na[0], 1)
-    buf = np.empty(nbuf)
-    dist = np.empty(nbuf)
-    src = np.empty(nbuf, dtype=np.int64)
-    nb = 0
-    for j in range(n_old):
-        phi, d, f, fp, _ = newton_closest(cxf, cyf, cand[j], 60, 1e-14, ms, rho0, orders, ccos,
-                                          csin, bphi, bh, bw, aphi, ah, aw, aidx, na[0])
-        if fp > 0.0 and abs(f / fp) < 1e-12:
-            buf[nb] = phi
-            dist[nb] = d
-            src[nb] = j
-            nb += 1
-    if na[0] > 0:
-        # the smooth track's closest point (asperities left out), then refined with them: the
-        # track beside and between asperities
-        pb, _, _, _, _ = newton_closest(cxf, cyf, cand[0], 60, 1e-14, ms, rho0, orders, ccos,
-                                        csin, bphi, bh, bw, aphi, ah, aw, aidx, 0)
-        for off in (0.0, -0.5, 0.5):
-            seed = pb + off * half
-            phi, d, f, fp, _ = newton_closest(cxf, cyf, seed, 200, 1e-14, ms, rho0, orders,
-                                              ccos, csin, bphi, bh, bw, aphi, ah, aw, aidx,
-                                              na[0])
-            if fp > 0.0 and abs(f / fp) < 1e-12 and d < reach:
-                buf[nb] = phi
-                dist[nb] = d
-                src[nb] = -1
-                nb += 1
-    for jj in range(na[0]):
-        i = aidx[jj]
-        if abs(_wrap(aphi[i] - cand[0])) > half:
+                if abs(_wrap(cand[e, a] - cand[e, b])) < 1e-7:
+                    return False
+    return True
+
+
+@njit_inline
+def _rank_primaries(x, CP, E, cand, ncand, cslack, travel):  # noqa: ANN001, ANN202
+    """Make each edge's deepest candidate its primary (the one with the stick spring).
+
+    A secondary takes the primary's place when it is closer while the primary is apart, or
+    deeper by ``SWAP_DEPTH`` while both touch; the primary's stick spring then starts anew:
+    its energy is returned (booked as dissipation by the caller). Only candidates re-solved
+    at this step compete (gap bound within ``4 travel + RESOLVE_GAP``: exact).
+    """
+    booked = 0.0
+    near = 4.0 * travel + RESOLVE_GAP
+    for e in range(E):
+        best = 0
+        for j in range(1, ncand[e]):
+            if cslack[e, j] <= near and cslack[e, j] < cslack[e, best]:
+                best = j
+        if best == 0:
             continue
-        for off in (-1.5, 0.0, 1.5):
-            seed = cand[0] + _wrap(aphi[i] + off * aw[i] - cand[0])
-            phi, d, f, fp, _ = newton_closest(cxf, cyf, seed, 60, 1e-14, ms, rho0, orders,
-                                              ccos, csin, bphi, bh, bw, aphi, ah, aw, aidx,
-                                              na[0])
-            if fp > 0.0 and abs(f / fp) < 1e-12 and d < reach:
-                buf[nb] = phi
-                dist[nb] = d
-                src[nb] = -1
-                nb += 1
-    # deduplicate (keep the first: old candidates come first) and keep those within reach
-    keep = np.zeros(nb, dtype=np.bool_)
-    best = -1
-    for a in range(nb):
-        dup = False
-        for b in range(a):
-            if keep[b] and abs(_wrap(buf[a] - buf[b])) < 1e-8:
-                dup = True
-                break
-        if dup:
+        if cslack[e, 0] <= 0.0 and cslack[e, best] > cslack[e, 0] - SWAP_DEPTH:
             continue
-        if dist[a] < reach:
-            keep[a] = True
-        if best < 0 or dist[a] < dist[best]:
-            best = a
-    # primary first, then the others
-    nn = 0
-    new_src0 = -2
-    if best >= 0:
-        keep[best] = True
-        cand[0] = buf[best]
-        new_src0 = src[best]
-        nn = 1
-    order = np.argsort(dist[:nb])  # the nearest first, should there be more than NCMAX
-    for a in order:
-        if keep[a] and a != best and nn < NCMAX:
-            cand[nn] = buf[a]
-            nn += 1
-    if nn == 0:  # nothing converged (should not happen): keep the old primary
-        nn = 1
-    ncand[0] = nn
-    same = nn == n_old and new_src0 == 0
-    if same:  # the same contacts, re-solved: nothing to book
-        for a in range(1, nn):
-            found = False
-            for b in range(nb):
-                if src[b] >= 0 and abs(_wrap(buf[b] - cand[a])) < 1e-8:
-                    found = True
-            same = same and found
-    if same:
-        return 0.0
-    if new_src0 != 0:  # the primary moved to another local minimum: its spring starts anew
-        x[IXI] = 0.0
-    contact_eval(x, 0.0, CP, cand, nn, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,
-                 aidx, na[0], 3, diag, dxv)
-    return e_old - diag[D_EEL]
+        p = cand[e, 0]
+        g = cslack[e, 0]
+        cand[e, 0] = cand[e, best]
+        cslack[e, 0] = cslack[e, best]
+        cand[e, best] = p
+        cslack[e, best] = g
+        ixi = IXI if e == 0 else IXI2
+        s = 1.0 if E == 1 else 0.5
+        booked += 0.5 * s * CP[I_KT] * x[ixi] * x[ixi]
+        x[ixi] = 0.0
+    return booked
 
 
 @njit
-def contact_steps(x0, u, h, nsteps, CP, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw,  # noqa: ANN001, ANN201
-                  aphi, ah, aw, aidx, na):  # noqa: ANN001
-    """Advance the contact model by ``nsteps`` RK4 steps of ``h`` [s] under command u.
+def update_contacts(x, CP, E, cand, ncand, cact, cslack, cbase, sst, rho0, orders, ccos, csin,  # noqa: ANN001, ANN201
+                    bphi, bh, bw, tphi, th, tw, span, hmax, aspc, travel, diag, dxv):  # noqa: ANN001
+    """Bring the contact set up to state x before a step whose travel bound is ``travel``.
 
-    Before every step the contact candidates are re-solved, every 8th step (and the first)
-    searched anew (:func:`update_candidates`); after
-    it a sliding or lost contact's stick spring is reset (module docstring). Energy removed
-    by these resets is added to ``W_diss``. Returns the final state; ``cand``/``ncand``/
-    ``aidx``/``na`` are updated in place.
+    Event-based (module docstring): a search when requested (``sst[1]``), when the ball
+    has travelled ``M / 2`` since the last one (``sst[0]`` plus this step's bound), when a
+    re-solve fails, or at every step in exhaustive mode; otherwise only the candidates that
+    may be needed are re-solved and the primaries ranked. Returns the elastic energy removed
+    by a change of the contact set at fixed state (booked as dissipation by the caller):
+    the stick spring of a primary that moved to another minimum, contacts that vanished.
     """
-    x = x0.copy()
-    xs = np.empty(NX)
-    k1 = np.empty(NX)
-    k2 = np.empty(NX)
-    k3 = np.empty(NX)
-    k4 = np.empty(NX)
-    diag = np.zeros(D_SIZE)
-    h2 = 0.5 * h
-    h6 = h / 6.0
-    for step in range(nsteps):
-        booked = update_candidates(x, CP, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw,
-                                   aphi, ah, aw, aidx, na, diag, k1, step % 8 == 0)
-        x[IWD] += booked
-        nc = ncand[0]
-        nl = na[0]
-        contact_eval(x, u, CP, cand, nc, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,
-                     aidx, nl, 2, diag, k1)
-        for i in range(NX):
-            xs[i] = x[i] + h2 * k1[i]
-        contact_eval(xs, u, CP, cand, nc, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,
-                     aidx, nl, 2, diag, k2)
-        for i in range(NX):
-            xs[i] = x[i] + h2 * k2[i]
-        contact_eval(xs, u, CP, cand, nc, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,
-                     aidx, nl, 2, diag, k3)
-        for i in range(NX):
-            xs[i] = x[i] + h * k3[i]
-        contact_eval(xs, u, CP, cand, nc, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,
-                     aidx, nl, 2, diag, k4)
-        for i in range(NX):
-            x[i] += h6 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-        # stick-spring projection at the primary contact
-        contact_eval(x, u, CP, cand, nc, rho0, orders, ccos, csin, bphi, bh, bw, aphi, ah, aw,
-                     aidx, nl, 2, diag, xs)
-        fn0 = diag[D_FN0]
-        xi = x[IXI]
+    search = CP[I_EXH] > 0.0 or sst[1] > 0.0 or (
+        sst[0] + travel >= 0.5 * CP[I_MARGIN] and (span[0] > 0.0 or span[E - 1] > 0.0))
+    if not search:
+        search = not resolve_contacts(x, CP, E, cand, ncand, cslack, travel, rho0, orders,
+                                      ccos, csin, bphi, bh, bw, tphi, th, tw, span)
+    if not search:
+        return _rank_primaries(x, CP, E, cand, ncand, cslack, travel)
+    # elastic energy of the contact set the last step integrated (as its stages saw it)
+    e_old = elastic_energy(x, CP, E, cand, ncand, rho0, orders, ccos, csin, bphi, bh, bw, tphi,
+                           th, tw, span, 2)
+    old = np.empty(2)
+    cxf, cyf = _frame_centre(x)
+    for e in range(E):  # the old primary's minimum at x
+        old[e] = newton_closest(cxf, cyf, cand[e, 0], 60, 1e-14, CP[I_MAXSTEP], rho0, orders,
+                                ccos, csin, bphi, bh, bw, tphi[e], th[e], tw[e], span[e])[0]
+    search_contacts(x, CP, E, cand, ncand, cslack, cbase, rho0, orders, ccos, csin, bphi, bh,
+                    bw, tphi, th, tw, span, hmax, aspc)
+    sst[0] = 0.0
+    sst[1] = 0.0
+    sst[4] += 1.0
+    for e in range(E):  # the primary moved to another local minimum: its spring starts anew
+        if abs(_wrap(cand[e, 0] - old[e])) > 1e-8:
+            x[IXI if e == 0 else IXI2] = 0.0
+    return e_old - elastic_energy(x, CP, E, cand, ncand, rho0, orders, ccos, csin, bphi, bh,
+                                  bw, tphi, th, tw, span, 3)
+
+
+@njit_inline
+def _travel_rate(x, dx, E, CP):  # noqa: ANN001, ANN202
+    """Bounds ``(v, a)`` of how fast the gaps can close.
+
+    The ball centre's speed relative to the frame [m/s] and a bound of its rate [m/s^2],
+    plus the edges' radii through z.
+
+    With ``c_f = Rot(-theta) c``: ``|c_f'| = |c' - theta' J c|`` and
+    ``|c_f''| <= |c''| + |theta''| |c| + 2 |theta'| |c'| + theta'^2 |c|`` (dx: a recent
+    derivative; doubled, plus 20 m/s^2). Any point's distance changes by at most the
+    centre's travel ``v H + a H^2 / 2`` over a step H (distance is 1-Lipschitz).
+    """
+    cx = x[IX]
+    cy = x[IY]
+    thd = x[ITHD]
+    vrx = x[IVX] + thd * cy
+    vry = x[IVY] - thd * cx
+    v = math.sqrt(vrx * vrx + vry * vry)
+    rc = math.sqrt(cx * cx + cy * cy)
+    sp = math.sqrt(x[IVX] * x[IVX] + x[IVY] * x[IVY])
+    a = (math.sqrt(dx[IVX] * dx[IVX] + dx[IVY] * dx[IVY]) + abs(dx[ITHD]) * rc
+         + 2.0 * abs(thd) * sp + thd * thd * rc)
+    if E == 2:  # |dR_e/dz| <= (d_f/2 + |z|) / R_e
+        dz = CP[I_ZE] + abs(x[IZ])
+        re = math.sqrt(max(CP[I_RB] * CP[I_RB] - dz * dz, 0.25 * CP[I_RB] * CP[I_RB]))
+        kz = dz / re
+        v += kz * abs(x[IVZ])
+        a += kz * abs(dx[IVZ]) + CP[I_RB] * CP[I_RB] / (re * re * re) * x[IVZ] * x[IVZ]
+    return v, 2.0 * a + 20.0
+
+
+@njit_inline
+def _flight_steps(x, CP, E, ncand, cslack, sst, v, a, h, left):  # noqa: ANN001, ANN202
+    """Steps of h to take at once: more than one only in free flight (module docstring).
+
+    No stick spring loaded, every candidate apart, and the ball's travel over the long
+    step at most half of every gap and of the search budget ``M / 2 - sst[0]``.
+    """
+    if CP[I_EXH] > 0.0 or CP[I_HFLY] < 2.0 * h or left < 2:
+        return 1
+    if x[IXI] != 0.0 or x[IXI2] != 0.0:
+        return 1
+    bound = 0.5 * CP[I_MARGIN] - sst[0]
+    for e in range(E):
+        for j in range(ncand[e]):
+            bound = min(bound, 0.5 * cslack[e, j])
+    if bound <= 0.0:
+        return 1
+    H = 2.0 * bound / (v + math.sqrt(v * v + 2.0 * a * bound))  # v H + a H^2 / 2 = bound
+    k = int(min(H, CP[I_HFLY]) / h)
+    return max(1, min(k, left))
+
+
+@njit_inline
+def _stick_projection(x, CP, E, diag):  # noqa: ANN001, ANN202
+    """After a step: a sliding primary's spring back to ``mu_d F_n / k_t``.
+
+    A lost contact's spring goes to 0 (module docstring); the released energy is booked as
+    dissipated.
+    """
+    released = 0.0
+    for e in range(E):
+        ixi = IXI if e == 0 else IXI2
+        xi = x[ixi]
+        if xi == 0.0:  # nothing to project (exactly: the rule keeps a zero spring)
+            continue
+        s, Re, _, _ = _edge_frame(E, e, x[IZ], CP)
+        ratio = 1.0 if E == 1 else CP[I_R] / Re
+        fn0 = diag[D_EFN + e]
         if fn0 <= 0.0:
             xi_new = 0.0
         else:
-            trial = CP[I_KT] * xi + CP[I_CT] * diag[D_VSLIP]
-            lim = CP[I_MUD] * fn0 / CP[I_KT]
+            trial = s * (CP[I_KT] * xi + CP[I_CT] * diag[D_EVS + e])
+            lim = CP[I_MUD] * ratio * fn0 / (s * CP[I_KT])
             xi_new = xi
-            if abs(trial) > CP[I_MUS] * fn0 and abs(xi) > lim:
+            if abs(trial) > CP[I_MUS] * ratio * fn0 and abs(xi) > lim:
                 xi_new = lim if xi > 0.0 else -lim
         if xi_new != xi:
-            x[IWD] += 0.5 * CP[I_KT] * (xi * xi - xi_new * xi_new)
-            x[IXI] = xi_new
+            released += 0.5 * s * CP[I_KT] * (xi * xi - xi_new * xi_new)
+            x[ixi] = xi_new
+    x[IWD] += released
+
+
+@njit
+def _rk4_step(x, u, H, CP, E, cand, ncand, cact, rho0, orders, ccos, csin, bphi, bh, bw,  # noqa: ANN001, ANN202
+              tphi, th, tw, span, diag, K, xs):  # noqa: ANN001
+    """One classical RK4 step of x over H [s] with this contact set (in place).
+
+    Stages ``K[0:4]``; then, with a stick spring loaded, the derivative at the new state into
+    ``K[4]`` (its ``diag`` serves the projection) and True; else ``K[4] = K[3]`` and False.
+    One evaluation site in a stage loop (:func:`_rhs` inlined once).
+    """
+    for stage in range(5):
+        if stage == 0:
+            for i in range(NX):
+                xs[i] = x[i]
+        elif stage < 4:
+            c = H if stage == 3 else 0.5 * H
+            for i in range(NX):
+                xs[i] = x[i] + c * K[stage - 1, i]
+        else:
+            h6 = H / 6.0
+            for i in range(NX):
+                x[i] += h6 * (K[0, i] + 2.0 * K[1, i] + 2.0 * K[2, i] + K[3, i])
+            if x[IXI] == 0.0 and x[IXI2] == 0.0:
+                for i in range(NX):
+                    K[4, i] = K[3, i]
+                return False
+            for i in range(NX):
+                xs[i] = x[i]
+        _rhs(xs, u, CP, E, cand, ncand, cact, False, rho0, orders, ccos, csin, bphi, bh, bw,
+             tphi, th, tw, span, 2, diag, K[stage])
+    return True
+
+
+@njit
+def contact_steps(x0, u, h, nsteps, CP, E, cand, ncand, cact, cslack, cbase, sst, rho0,  # noqa: ANN001, ANN201
+                  orders, ccos, csin, bphi, bh, bw, tphi, th, tw, span, hmax, aspc):  # noqa: ANN001
+    """Advance the contact model by ``nsteps`` steps of ``h`` [s] under command u.
+
+    Before every step the contact set is brought up to date (:func:`update_contacts`); in
+    free flight several steps are taken at once (:func:`_flight_steps`), always whole
+    multiples of h; after a step a sliding or lost primary's stick spring is projected
+    (:func:`_stick_projection`). Energy removed by contact-set changes and projections is
+    added to ``W_diss``. ``sst[2]`` counts the steps taken, ``sst[3]`` the time they covered
+    [s], ``sst[4]`` the searches. Returns the final state; the contact set arrays are updated
+    in place.
+    """
+    x = x0.copy()
+    xs = np.empty(NX)
+    K = np.empty((5, NX))
+    diag = np.zeros(D_SIZE)
+    contact_eval(x, u, CP, E, cand, ncand, cact, True, rho0, orders, ccos, csin, bphi, bh, bw,
+                 tphi, th, tw, span, 2, diag, K[4])
+    done = 0
+    while done < nsteps:
+        v, a = _travel_rate(x, K[4], E, CP)
+        x[IWD] += update_contacts(x, CP, E, cand, ncand, cact, cslack, cbase, sst, rho0,
+                                  orders, ccos, csin, bphi, bh, bw, tphi, th, tw, span, hmax,
+                                  aspc, v * h + 0.5 * a * h * h, diag, xs)
+        k = _flight_steps(x, CP, E, ncand, cslack, sst, v, a, h, nsteps - done)
+        H = k * h
+        travel = v * H + 0.5 * a * H * H
+        for e in range(E):
+            for j in range(ncand[e]):
+                cact[e, j] = 1 if (CP[I_EXH] > 0.0 or cslack[e, j] <= travel) else 0
+        if _rk4_step(x, u, H, CP, E, cand, ncand, cact, rho0, orders, ccos, csin, bphi, bh,
+                     bw, tphi, th, tw, span, diag, K, xs):
+            _stick_projection(x, CP, E, diag)
+        for e in range(E):
+            for j in range(ncand[e]):
+                cslack[e, j] -= travel
+        sst[0] += travel
+        sst[2] += 1.0
+        sst[3] += H
+        done += k
     return x
 
 
@@ -637,49 +938,132 @@ class ContactModel:
     Parameters
     ----------
     params : RigParams
-        Physical parameters; ``contact.*`` sets the contact law and the step,
-        ``track.asperity_*`` adds sharp bumps the rigid model cannot carry.
+        Physical parameters; ``contact.*`` sets the contact law and the steps,
+        ``track.asperity_*`` adds sharp bumps the rigid model cannot carry, on one plate edge
+        or both (``track.asperity_edge``).
     time_step : float, optional
         Override of ``contact.time_step`` [s].
+    edges : int, optional
+        1: the two identical plate edges act as one contact (the ball's in-plane disc of
+        radius R); 2: each edge its own contacts and the ball's lateral position z (module
+        docstring). Default: 2 when an asperity sits on one edge only, else 1.
+    exhaustive : bool
+        Search the contact set and evaluate every candidate at every step, no free-flight
+        steps: the reference the event-based stepping is tested against.
+    margin : float
+        Reach margin M of the contact search [m] (:func:`bfr_model.layout.with_contact`).
     """
 
-    def __init__(self, params: RigParams, time_step: float | None = None) -> None:
+    def __init__(self, params: RigParams, time_step: float | None = None, *,
+                 edges: int | None = None, exhaustive: bool = False,
+                 margin: float = 4e-4) -> None:
         if params.frame.wobble != 0.0:
             raise ValueError("the contact model is planar: frame.wobble is not supported "
                              "(use the rigid model for the wobbling frame)")
+        one_sided = any(e != 0 for e in params.track.asperity_edges())
+        if edges is None:
+            edges = 2 if one_sided else 1
+        if edges not in (1, 2):
+            raise ValueError(f"edges must be 1 or 2, got {edges!r}")
+        if edges == 1 and one_sided:
+            raise ValueError("asperities on one plate edge only (track.asperity_edge) need "
+                             "the two-edge contact (edges=2)")
         self.params = params
-        self.data: ContourData = contour_data(params)
+        self.edges = int(edges)
+        self.datas: list[ContourData] = ([contour_data(params)] if edges == 1 else
+                                         [contour_data(params, 1), contour_data(params, 2)])
+        self.data: ContourData = self.datas[0]
         self.curve = OffsetCurve.from_params(params)  # bumps, no asperities: conversions
         c = params.contact
         damping = damping_for_restitution(params.contact_stiffness, c.exponent,
                                           c.damping_exponent, params.ball.mass,
                                           c.restitution, c.restitution_speed)
-        CP = with_contact(rigid_vector(params), params, damping=damping,
-                          search_step=0.25 * min(self.data.min_width, 0.2))
-        self.CP = CP
+        w_min = min(*(d.min_width for d in self.datas), 0.2)
+        self.CP = with_contact(rigid_vector(params), params, damping=damping,
+                               search_step=0.25 * w_min, margin=margin,
+                               exhaustive=exhaustive)
         self.time_step = float(time_step or c.time_step)
-        self.cand = np.zeros(NCMAX)
-        self.ncand = np.zeros(1, dtype=np.int64)
-        self.aidx = np.zeros(max(self.data.aphi.size, 1), dtype=np.int64)
-        self.na = np.zeros(1, dtype=np.int64)
-        self._args = (self.data.rho0, self.data.orders, self.data.ccos, self.data.csin,
-                      self.data.bphi, self.data.bh, self.data.bw, self.data.aphi,
-                      self.data.ah, self.data.aw)
+        # per-edge asperity tables (two rows always; one used with one edge)
+        rows = [*self.datas, self.datas[-1]][:2]
+        n = max(d.tphi.size for d in rows)
+        self.tphi = np.full((2, n), np.inf)
+        self.th = np.zeros((2, n))
+        self.tw = np.ones((2, n))
+        for e, d in enumerate(rows):
+            self.tphi[e, :d.tphi.size] = d.tphi
+            self.th[e, :d.th.size] = d.th
+            self.tw[e, :d.tw.size] = d.tw
+        self.span = np.array([d.span for d in rows])
+        self.hmax = np.array([d.asperity_height for d in rows])
+        self.aspc = np.array([0.25 * min(d.asperity_min_width, 4.0) for d in rows])
+        # the contact set (module docstring)
+        self.cand = np.zeros((2, NCMAX))
+        self.cslack = np.zeros((2, NCMAX))
+        self.cact = np.ones((2, NCMAX), dtype=np.int8)
+        self.ncand = np.zeros(2, dtype=np.int64)
+        self.cbase = np.zeros(2)
+        self.sst = np.zeros(5)
+        d0 = self.data
+        self._geo = (d0.rho0, d0.orders, d0.ccos, d0.csin, d0.bphi, d0.bh, d0.bw, self.tphi,
+                     self.th, self.tw, self.span)
 
     # -- contact set -----------------------------------------------------------------------
+    def _set_arrays(self) -> tuple:
+        return (self.cand, self.ncand, self.cact, self.cslack, self.cbase, self.sst)
+
     def reset(self, x: ArrayLike, phi_guess: float | None = None) -> None:
-        """Initialise the contact candidates for state x (global closest point if no guess)."""
+        """Initialise the contact set for state x (global closest point if no guess).
+
+        Each edge starts from its closest point; the next step searches the set anew.
+        """
         x = np.asarray(x, float)
         st, ct = math.sin(x[ITH]), math.cos(x[ITH])
         cf = np.array([ct * x[IX] + st * x[IY], -st * x[IX] + ct * x[IY]])
-        if phi_guess is None:
-            phi, _ = closest_point(self.data, cf)
-        else:
-            phi, _ = closest_point(self.data, cf, phi0=phi_guess)
         self.cand[:] = 0.0
-        self.cand[0] = phi
-        self.ncand[0] = 1
-        self.na[0] = 0
+        self.cslack[:] = 0.0
+        self.ncand[:] = 0
+        for e, data in enumerate(self.datas):
+            phi, d = closest_point(data, cf, phi0=phi_guess)
+            self.cand[e, 0] = phi
+            self.cbase[e] = phi
+            self.ncand[e] = 1
+            self.cslack[e, 0] = d - self._edge_radius(e, float(x[IZ])) - abs(self.CP[I_EL])
+        self.sst[:2] = (0.0, 1.0)
+
+    def _edge_radius(self, e: int, z: float) -> float:
+        if self.edges == 1:
+            return float(self.CP[I_R])
+        ze = self.CP[I_ZE] if e == 0 else -self.CP[I_ZE]
+        return math.sqrt(self.CP[I_RB] ** 2 - (z - ze) ** 2)
+
+    def snapshot(self) -> tuple[np.ndarray, ...]:
+        """A copy of the contact set (to restart a step from the same state)."""
+        return tuple(a.copy() for a in self._set_arrays())
+
+    def restore(self, snap: tuple[np.ndarray, ...]) -> None:
+        """Restore a contact set taken by :meth:`snapshot`."""
+        for a, b in zip(self._set_arrays(), snap, strict=True):
+            a[...] = b
+
+    def follow(self, x: ArrayLike, search: bool = False) -> float:
+        """Bring the contact set up to state x: every candidate re-solved, or searched anew.
+
+        Returns the elastic energy a search removed (as the stepper books it); x itself is
+        not changed. For scipy's solvers on :meth:`rhs`, whose contact set must follow the
+        state (the bench's baselines).
+        """
+        xx = np.array(x, float)
+        if self.ncand[0] == 0:
+            self.reset(xx)
+        if not search and resolve_contacts(xx, self.CP, self.edges, self.cand, self.ncand,
+                                           self.cslack, -1.0, *self._geo):
+            return 0.0
+        self.sst[1] = 1.0
+        diag = np.zeros(D_SIZE)
+        return float(update_contacts(xx, self.CP, self.edges, self.cand, self.ncand,
+                                     self.cact, self.cslack, self.cbase, self.sst,
+                                     *self._geo, self.hmax, self.aspc, 0.0, diag,
+                                     np.empty(NX)))
 
     # -- conversions -----------------------------------------------------------------------
     def state_from_rigid(self, xr: ArrayLike, u: float = 0.0, preload: bool = True
@@ -696,7 +1080,7 @@ class ContactModel:
         xr = np.asarray(xr, float)
         th, ph, thd, phd = (float(v) for v in xr[:4])
         rp = self.params.replace(**{"track.asperity_phi": [], "track.asperity_height": [],
-                                    "track.asperity_width": []})
+                                    "track.asperity_width": [], "track.asperity_edge": []})
         rm = RigidModel(rp)
         px, py, p1x, p1y, p2x, p2y, nx, ny, lam, _ = (
             float(v) for v in curve_terms(ph, *rm.kernel_args))
@@ -730,6 +1114,8 @@ class ContactModel:
         x[ITHD] = thd
         x[IOM] = thd - lam * phd / R
         x[IXI] = xi0
+        if self.edges == 2:  # each edge's spring carries half the force at half the stiffness
+            x[IXI2] = xi0
         if self.CP[I_EL] != 0.0:
             # rigid: beta = beta0 + s(phi) / R + nu(phi); contact: beta = theta + nu + pi - psi
             x[IPSI] = (th + math.pi - self.params.ball.ellipse_phase
@@ -756,7 +1142,7 @@ class ContactModel:
         xs = np.atleast_2d(np.asarray(x, float))
         out = np.empty((xs.shape[0], 4))
         guess = phi0 if phi0 is not None else (
-            float(self.cand[0]) if self.ncand[0] > 0 else None)
+            float(self.cand[0, 0]) if self.ncand[0] > 0 else None)
         for i, xi in enumerate(xs):
             st, ct = math.sin(xi[ITH]), math.cos(xi[ITH])
             cf = np.array([ct * xi[IX] + st * xi[IY], -st * xi[IX] + ct * xi[IY]])
@@ -776,8 +1162,11 @@ class ContactModel:
     def _eval(self, x: FloatArray, u: float) -> tuple[FloatArray, FloatArray]:
         diag = np.zeros(D_SIZE)
         dx = np.empty(NX)
-        contact_eval(np.asarray(x, float), float(u), self.CP, self.cand, int(self.ncand[0]),
-                     *self._args, self.aidx, int(self.na[0]), 3, diag, dx)
+        x = np.asarray(x, float)
+        if self.ncand[0] == 0:
+            self.reset(x)
+        contact_eval(x, float(u), self.CP, self.edges, self.cand, self.ncand, self.cact, True,
+                     *self._geo, 3, diag, dx)
         return dx, diag
 
     def rhs(self, t: float, x: FloatArray, u: float) -> FloatArray:
@@ -785,18 +1174,27 @@ class ContactModel:
         return self._eval(x, u)[0]
 
     def diagnostics(self, x: ArrayLike, u: float = 0.0) -> dict:
-        """Normal force, penetration, slip velocity, contact count and elastic energy at x."""
+        """Normal force, penetration, slip velocity, contact count and elastic energy at x.
+
+        ``penetration`` is the deepest primary's w (< 0: apart); ``edge_*`` lists give each
+        edge's primary contact (one entry with one edge).
+        """
         _, d = self._eval(np.asarray(x, float), u)
+        ed = range(self.edges)
         return {"normal_force": d[D_FN], "primary_normal_force": d[D_FN0],
                 "penetration": d[D_W0], "slip_velocity": d[D_VSLIP],
                 "contacts": int(d[D_NTOUCH]), "tangential_force": d[D_FT0], "phi": d[D_PHI0],
-                "distance": d[D_D0], "elastic_energy": d[D_EEL]}
+                "distance": d[D_D0], "elastic_energy": d[D_EEL],
+                "edge_normal_force": [float(d[D_EFN + e]) for e in ed],
+                "edge_penetration": [float(d[D_EW + e]) for e in ed],
+                "edge_slip_velocity": [float(d[D_EVS + e]) for e in ed]}
 
     def energy(self, x: ArrayLike) -> tuple[float, float, float]:
         """(kinetic, potential, elastic) energy [J] at state x (current contact set)."""
         x = np.asarray(x, float)
         p = self.params
-        kin = 0.5 * (p.ball.mass * (x[IVX] ** 2 + x[IVY] ** 2) + p.ball.inertia * x[IOM] ** 2
+        kin = 0.5 * (p.ball.mass * (x[IVX] ** 2 + x[IVY] ** 2 + x[IVZ] ** 2)
+                     + p.ball.inertia * (x[IOM] ** 2 + x[IWPX] ** 2 + x[IWPY] ** 2)
                      + p.frame.inertia * x[ITHD] ** 2)
         pot = p.ball.mass * self.CP[I_G] * x[IY]
         return kin, pot, self.diagnostics(x)["elastic_energy"]
@@ -804,14 +1202,15 @@ class ContactModel:
     def step(self, x: ArrayLike, u: float, dt: float, n: int = 1) -> FloatArray:
         """Advance x by n intervals of dt [s] under a held command u [N m].
 
-        Inner steps of at most ``time_step``; the contact set is initialised on first use.
+        Steps of at most ``time_step`` (several at once in free flight); the contact set is
+        initialised on first use.
         """
         x = np.asarray(x, float)
         if self.ncand[0] == 0:
             self.reset(x)
         m = max(1, math.ceil(dt / self.time_step - 1e-9))
-        return contact_steps(x, float(u), dt / m, int(n * m), self.CP, self.cand, self.ncand,
-                             *self._args, self.aidx, self.na)
+        return contact_steps(x, float(u), dt / m, int(n * m), self.CP, self.edges,
+                             *self._set_arrays(), *self._geo, self.hmax, self.aspc)
 
     def record(self, x: ArrayLike, u: float = 0.0) -> tuple[float, float, float, float]:
         """Diagnostics at x with the current contact set (call right after :meth:`step`).
@@ -841,7 +1240,7 @@ class ContactModel:
         xs[0] = x0
         if self.ncand[0] == 0:
             self.reset(xs[0])
-        phi_start = float(self.cand[0])
+        phi_start = float(self.cand[0, 0])
         rec[0] = self.record(xs[0], u[0])
         wall = 0.0
         for i in range(n):

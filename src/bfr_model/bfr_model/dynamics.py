@@ -101,7 +101,6 @@ from bfr_model.layout import (
     I_TC,
     I_VC,
     I_VR,
-    P_SIZE,
     rigid_vector,
 )
 from bfr_model.params import RigParams
@@ -148,13 +147,16 @@ def curve_terms(phi, P, R, rho0, orders, ccos, csin, bphi, bh, bw):  # noqa: ANN
     e0 = P[I_EL]
     if e0 != 0.0:
         ns = int(P[I_NS])
+        # the series ends P (counted from the end, not from P_SIZE: a kernel cached under an
+        # older, shorter layout would keep reading at the old P_SIZE)
+        tail = P.shape[0] - 2 * ns
         s = P[I_SBAR] * phi
         c1 = np.cos(phi)
         s1 = np.sin(phi)
         ck = c1
         sk = s1
         for k in range(1, ns + 1):  # cos k phi, sin k phi by the angle-addition recurrence
-            s = s + P[P_SIZE + k - 1] * (ck - 1.0) + P[P_SIZE + ns + k - 1] * sk
+            s = s + P[tail + k - 1] * (ck - 1.0) + P[tail + ns + k - 1] * sk
             ck, sk = ck * c1 - sk * s1, sk * c1 + ck * s1
         K1 = -((p3x * nx + p3y * ny) + 2.0 * lam1 * K) / lam
         tx = ny

@@ -35,8 +35,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from bfr_model.jit import njit
 from numpy.typing import ArrayLike, NDArray
+
+from bfr_model.jit import njit
 
 __all__ = ["ContourArrays", "OffsetCurve", "contour_kernel", "offset_kernel"]
 

@@ -15,9 +15,10 @@ from __future__ import annotations
 from collections.abc import Callable
 
 import numpy as np
-from bfr_model.jit import njit
 from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
+
+from bfr_model.jit import njit
 
 __all__ = ["IntegrationError", "rk4_steps", "rk4_trajectory", "solve_adaptive"]
 

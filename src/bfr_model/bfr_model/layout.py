@@ -38,6 +38,11 @@ index           entry [unit]                                 source (rig.yaml)
 ``I_VREG``      slip regularisation velocity [m/s]           (numerical)
 ``I_MARGIN``    contact-search margin [m]                    (numerical)
 ``I_MAXSTEP``   contact-search step [rad]                    (numerical)
+``I_RB``        ball radius R_b [m] (two-edge contact)       ball.radius
+``I_ZE``        half the plate distance d_f / 2 [m]          ball.plate_distance
+``I_HFLY``      longest free-flight step [s]                 contact.max_flight_step
+``I_EXH``       1: search and evaluate every contact at      (numerical; the reference of
+                every step (no event-based shortcuts)        the tests)
 ``I_MEX``       frame's first mass moment, x [kg m]          frame.imbalance, _angle
 ``I_MEY``       frame's first mass moment, y [kg m]          (m_f e [sin, cos] theta_e)
 ``I_TAU0``      drive's torque offset tau_0 [N m]            actuator.torque_offset
@@ -61,10 +66,11 @@ from numpy.typing import NDArray
 from bfr_model.params import RigParams
 
 __all__ = [
-    "I_CL", "I_CT", "I_CV", "I_CW", "I_DAMP", "I_EB0", "I_EL", "I_G", "I_JB", "I_JF", "I_K",
-    "I_KT", "I_KU", "I_M", "I_MARGIN", "I_MAXSTEP", "I_MEX", "I_MEY", "I_MF", "I_MUD", "I_MUR",
-    "I_MUS", "I_NEXP", "I_NS", "I_PEXP", "I_R", "I_SBAR", "I_SW", "I_TAU0", "I_TC", "I_VC",
-    "I_VR", "I_VREG", "P_SIZE", "rigid_vector", "with_contact",
+    "I_CL", "I_CT", "I_CV", "I_CW", "I_DAMP", "I_EB0", "I_EL", "I_EXH", "I_G", "I_HFLY",
+    "I_JB", "I_JF", "I_K", "I_KT", "I_KU", "I_M", "I_MARGIN", "I_MAXSTEP", "I_MEX", "I_MEY",
+    "I_MF", "I_MUD", "I_MUR", "I_MUS", "I_NEXP", "I_NS", "I_PEXP", "I_R", "I_RB", "I_SBAR",
+    "I_SW", "I_TAU0", "I_TC", "I_VC", "I_VR", "I_VREG", "I_ZE", "P_SIZE", "rigid_vector",
+    "with_contact",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -74,9 +80,11 @@ I_M, I_JB, I_JF, I_R, I_G, I_CV, I_TC, I_VC, I_MUR, I_VR, I_KU = range(11)
 I_CW, I_SW, I_CL, I_MF, I_EL, I_EB0, I_SBAR, I_NS = range(11, 19)
 # contact model (zero in a rigid model's vector)
 I_K, I_NEXP, I_DAMP, I_PEXP, I_MUS, I_MUD, I_KT, I_CT, I_VREG, I_MARGIN, I_MAXSTEP = range(19, 30)
+# contact model, two-edge contact and event-based stepping (issue 16)
+I_RB, I_ZE, I_HFLY, I_EXH = range(30, 34)
 # rigid model, appended: frame imbalance and the drive's torque offset
-I_MEX, I_MEY, I_TAU0 = range(30, 33)
-P_SIZE = 33
+I_MEX, I_MEY, I_TAU0 = range(34, 37)
+P_SIZE = 37
 
 
 def rigid_vector(params: RigParams) -> FloatArray:
@@ -108,8 +116,8 @@ def rigid_vector(params: RigParams) -> FloatArray:
     return P
 
 
-def with_contact(P: FloatArray, params: RigParams, *, damping: float, search_step: float
-                 ) -> FloatArray:
+def with_contact(P: FloatArray, params: RigParams, *, damping: float, search_step: float,
+                 margin: float = 4e-4, exhaustive: bool = False) -> FloatArray:
     """A copy of ``P`` with the contact model's block filled.
 
     Parameters
@@ -122,6 +130,12 @@ def with_contact(P: FloatArray, params: RigParams, *, damping: float, search_ste
         The contact damping d [N s/m^(p+1)] (from the restitution; the contact model's).
     search_step : float
         Largest step of the contact search along the contour [rad].
+    margin : float
+        Reach margin M of the contact search [m]: contour minima within ``R + M`` of the
+        ball centre are tracked, and the search runs again after the ball has travelled
+        ``M / 2`` relative to the frame.
+    exhaustive : bool
+        Search and evaluate every contact at every step (the reference of the tests).
     """
     c = params.contact
     out = np.array(P, float)
@@ -137,6 +151,10 @@ def with_contact(P: FloatArray, params: RigParams, *, damping: float, search_ste
     out[I_KT] = c.tangential_stiffness
     out[I_CT] = c.tangential_damping
     out[I_VREG] = 1e-3
-    out[I_MARGIN] = 1e-3
+    out[I_MARGIN] = margin
     out[I_MAXSTEP] = search_step
+    out[I_RB] = params.ball.radius
+    out[I_ZE] = 0.5 * params.ball.plate_distance
+    out[I_HFLY] = params.contact.max_flight_step
+    out[I_EXH] = 1.0 if exhaustive else 0.0
     return out

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 import yaml
+
 from bfr_model.geometry import OffsetCurve
 from bfr_model.param_file import (
     ParameterError,
@@ -256,6 +257,12 @@ class TrackParams:
         Sharp bumps of the same form (single bumps, a row, a rough surface drawn by
         :func:`bfr_model.perturbations.rough_track`) that only the contact model
         (:mod:`bfr_model.contact`) resolves; the rigid model leaves them out.
+    asperity_edge : tuple of int
+        [-] the plate edge each sharp bump sits on (seed recommendation 3): 0 both edges,
+        1 the front plate (z = +d_f/2, towards the camera), 2 the back plate (z = -d_f/2).
+        Empty, or all zeros of any length (the file's ``[0]``), means every asperity is on
+        both edges; otherwise one entry per asperity. Bumps on one edge only need the
+        contact model's two-edge contact (:class:`bfr_model.contact.ContactModel`).
     """
 
     rolling_resistance: float = 0.0
@@ -266,6 +273,7 @@ class TrackParams:
     asperity_phi: tuple[float, ...] = ()
     asperity_height: tuple[float, ...] = ()
     asperity_width: tuple[float, ...] = ()
+    asperity_edge: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         nonnegative("track.rolling_resistance", self.rolling_resistance)
@@ -287,6 +295,15 @@ class TrackParams:
             finite("track.asperity_phi/height", v)
         for v in self.asperity_width:
             positive("track.asperity_width", v)
+        check(len(self.asperity_edge) in (0, n), "track.asperity_edge",
+              f"needs one entry per asperity ({n}), got {len(self.asperity_edge)}")
+        for v in self.asperity_edge:
+            check(v in (0, 1, 2), "track.asperity_edge",
+                  f"{v!r} is not an edge (0 both, 1 front, 2 back)")
+
+    def asperity_edges(self) -> tuple[int, ...]:
+        """The edge of every asperity (0 both, 1 front, 2 back), zeros when not given."""
+        return self.asperity_edge or (0,) * len(self.asperity_phi)
 
 
 @dataclass(frozen=True)
@@ -328,6 +345,10 @@ class ContactParams:
         [N s/m] of the stick damper.
     time_step : float
         [s] fixed step of the compiled contact integrator (contact modes near 1-2 kHz).
+    max_flight_step : float
+        [s] longest step while no contact can begin (free flight, a bound on the ball's
+        travel against the gap: bfr_model.contact); a whole multiple of ``time_step`` is
+        taken. Below ``2 time_step`` every step is ``time_step``.
     """
 
     stiffness: float = 0.0
@@ -344,6 +365,7 @@ class ContactParams:
     tangential_stiffness: float = 1.5e5
     tangential_damping: float = 20.0
     time_step: float = 2.0e-5
+    max_flight_step: float = 2.5e-4
 
     def __post_init__(self) -> None:
         nonnegative("contact.stiffness", self.stiffness)
@@ -366,6 +388,8 @@ class ContactParams:
         nonnegative("contact.tangential_damping", self.tangential_damping)
         positive("contact.time_step", self.time_step)
         check(self.time_step <= 1e-3, "contact.time_step", "must be <= 1e-3 s (stiff contact)")
+        nonnegative("contact.max_flight_step", self.max_flight_step)
+        check(self.max_flight_step <= 1e-3, "contact.max_flight_step", "must be <= 1e-3 s")
 
     def effective_modulus(self) -> float:
         """E* = 1 / ((1 - nu_b^2) / E_b + (1 - nu_f^2) / E_f) [Pa] (Hertz)."""
@@ -541,11 +565,17 @@ def params_from_dict(d: Mapping[str, Any]) -> RigParams:
     pos = tuple(float(v) for v in track.get("asperity_phi", ()))
     hgt = tuple(float(v) for v in track.get("asperity_height", ()))
     wid = tuple(float(v) for v in track.get("asperity_width", ()))
+    edge = tuple(track.get("asperity_edge", ()))
+    if edge and all(v == 0 for v in edge):
+        edge = ()  # all zeros (the file's [0]): every asperity on both edges
     if len(pos) == len(hgt) == len(wid):
         keep = [i for i in range(len(pos)) if hgt[i] != 0.0]
+        if len(edge) == len(pos):
+            edge = tuple(edge[i] for i in keep)
         pos, hgt, wid = (tuple(pos[i] for i in keep), tuple(hgt[i] for i in keep),
                          tuple(wid[i] for i in keep))
-    track.update(asperity_phi=pos, asperity_height=hgt, asperity_width=wid)
+    track.update(asperity_phi=pos, asperity_height=hgt, asperity_width=wid,
+                 asperity_edge=edge)
     return RigParams(
         ball=_build(BallParams, _group(d, "ball"), "ball"),
         frame=_build(FrameParams, frame, "frame"),
@@ -600,6 +630,8 @@ def params_to_ros_yaml(params: RigParams, header: str = "") -> str:
         t.update(bump_phi=[0.0], bump_height=[0.0], bump_width=[0.05])
     if not t["asperity_phi"]:
         t.update(asperity_phi=[0.0], asperity_height=[0.0], asperity_width=[0.005])
+    if not t["asperity_edge"]:
+        t.update(asperity_edge=[0])
     body = yaml.safe_dump({"/**": {"ros__parameters": d}}, sort_keys=False)
     lines = [f"# {h}" for h in header.splitlines()] if header else []
     return "\n".join([*lines, body])

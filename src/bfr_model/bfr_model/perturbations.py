@@ -49,14 +49,17 @@ from typing import Any
 
 import numpy as np
 import yaml
-from bfr_model.geometry import OffsetCurve, contour_kernel
-from bfr_model.params import ParameterError, RigParams, default_params_path, params_to_ros_yaml
 from numpy.typing import NDArray
+
+from bfr_model.geometry import OffsetCurve, contour_kernel
+from bfr_model.param_file import check, positive
+from bfr_model.params import ParameterError, RigParams, default_params_path, params_to_ros_yaml
 
 __all__ = [
     "PERTURBATIONS",
     "Perturbation",
     "StudySettings",
+    "TwoEdgeSettings",
     "bump_row",
     "contour_arc_to_phi",
     "hc_stiffness_from_linear",
@@ -125,6 +128,37 @@ class ContactRunSettings:
 
 
 @dataclass(frozen=True)
+class TwoEdgeSettings:
+    """``two_edge:`` group: bumps on both plate edges (seed recommendation 3).
+
+    Rows of ``row_length`` along the contour on both halves of it, centred at
+    ``location`` (None: where the discrete model puts path B). Around the reference row
+    (``spacing``, ``height``): a phase sweep of the back edge's row against the front one
+    (in bump spacings), a spacing sweep and a height sweep, each with the front row alone,
+    in phase (0) and interleaved (0.5).
+    """
+
+    duration: float = 8.0
+    location: float | None = None
+    row_length: float = 0.03
+    width: float = 1.0e-4
+    spacing: float = 1.0e-3
+    height: float = 5.0e-4
+    phases: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75)
+    spacings: tuple[float, ...] = (2.0e-3, 4.0e-3, 8.0e-3)
+    heights: tuple[float, ...] = (1.0e-4, 2.5e-4)
+    time_step: float = 2.0e-5
+
+    def __post_init__(self) -> None:
+        for name in ("duration", "row_length", "width", "spacing", "height", "time_step"):
+            positive(f"two_edge.{name}", getattr(self, name))
+        for v in (*self.spacings, *self.heights):
+            positive("two_edge.spacings/heights", v)
+        for v in self.phases:
+            check(0.0 <= v < 1.0, "two_edge.phases", f"{v} is not within [0, 1)")
+
+
+@dataclass(frozen=True)
 class StudySettings:
     """All settings of the perturbation study (``config/perturbation_study.yaml``)."""
 
@@ -132,6 +166,7 @@ class StudySettings:
     run: RunSettings = field(default_factory=RunSettings)
     bounce: BounceSettings = field(default_factory=BounceSettings)
     contact_run: ContactRunSettings = field(default_factory=ContactRunSettings)
+    two_edge: TwoEdgeSettings = field(default_factory=TwoEdgeSettings)
 
 
 def default_study_path() -> Path:
@@ -317,15 +352,23 @@ def rough_track(params: RigParams, rng: np.random.Generator, count: int,
 
 
 def with_asperities(params: RigParams, phi: FloatArray, height: FloatArray, width: FloatArray,
-                    append: bool = True) -> RigParams:
-    """``params`` with the given sharp bumps in ``track.asperity_*`` (added or replacing)."""
+                    append: bool = True, edge: int | FloatArray = 0) -> RigParams:
+    """``params`` with the given sharp bumps in ``track.asperity_*`` (added or replacing).
+
+    ``edge``: the plate edge of the new bumps (0 both, 1 front, 2 back; one value or one per
+    bump), into ``track.asperity_edge``.
+    """
     t = params.track
+    n = len(phi)
+    new_edge = [int(v) for v in np.broadcast_to(np.asarray(edge, int), (n,))]
     ph = [*t.asperity_phi, *phi] if append else list(phi)
     hh = [*t.asperity_height, *height] if append else list(height)
     ww = [*t.asperity_width, *width] if append else list(width)
+    ee = [*t.asperity_edges(), *new_edge] if append else new_edge
     return params.replace(**{"track.asperity_phi": [float(v) for v in ph],
                              "track.asperity_height": [float(v) for v in hh],
-                             "track.asperity_width": [float(v) for v in ww]})
+                             "track.asperity_width": [float(v) for v in ww],
+                             "track.asperity_edge": ee if any(ee) else []})
 
 
 def write_params(params: RigParams, path: str | Path, header: str = "") -> Path:

@@ -13,9 +13,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
+
 from bfr_model.dynamics import RigidModel, rigid_rhs
 from bfr_model.integrators import IntegrationError, solve_adaptive
-from numpy.typing import NDArray
 
 __all__ = ["CSV_COLUMNS", "SimResult", "simulate", "torque_from_csv", "write_csv"]
 

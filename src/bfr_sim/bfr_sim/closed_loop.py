@@ -11,7 +11,12 @@ only what the rig gives it:
   plant's time grid, Gaussian noise ``camera_noise`` per axis, delivered ``camera_latency``
   after the exposure with the exposure time stamp; frames can be dropped at random
   (``camera_dropout``) or blacked out over time intervals (``camera_blackouts``); a dropped
-  frame arrives as ``valid = False, x = y = 0`` (as on the rig).
+  frame arrives as ``valid = False, x = y = 0`` (as on the rig);
+- actuation: the torque computed at a control step acts ``actuation_delay`` later (on the
+  plant grid; the previous torque acts meanwhile), as on hardware, where camera
+  processing, transport and the drive's update separate the sample from the torque. The
+  controller is told the delay (``lead``, as the controller node measures it) unless
+  ``predict_delay`` is off.
 
 All noise comes from one seeded ``numpy.random.Generator``. The run records the true state,
 the torque, the camera frames, the controller's estimates and mode, and the transverse
@@ -74,6 +79,8 @@ class SensorConfig:
         Encoder counts per revolution (0: exact theta) [-].
     encoder_rate_noise : float
         Standard deviation of the theta_dot noise [rad/s].
+    actuation_delay : float
+        From the control step's encoder sample to the moment its torque acts [s].
     """
 
     camera_rate: float = 200.0
@@ -83,10 +90,11 @@ class SensorConfig:
     camera_blackouts: tuple[tuple[float, float], ...] = ()
     encoder_counts: int = 0
     encoder_rate_noise: float = 0.0
+    actuation_delay: float = 0.0
 
     def __post_init__(self) -> None:
         positive("sensors.camera_rate", self.camera_rate)
-        for name in ("camera_latency", "camera_noise", "encoder_rate_noise"):
+        for name in ("camera_latency", "camera_noise", "encoder_rate_noise", "actuation_delay"):
             nonnegative(f"sensors.{name}", getattr(self, name))
         in_range("sensors.camera_dropout", self.camera_dropout, 0.0, 1.0)
         integer("sensors.encoder_counts", self.encoder_counts, minimum=0)
@@ -415,18 +423,39 @@ def _ball_failed(x: FloatArray, cmd: Command, pargs: tuple) -> bool:
                 or rigid_terms(x[0], x[1], x[2], x[3], cmd.torque, *pargs)[4] <= 0.0)
 
 
-def _plant_period(x: FloatArray, t: float, u: float, grid: _ControlGrid, camera: _Camera,
-                  pargs: tuple) -> tuple[FloatArray, int]:
-    """The plant over one control period from ``t`` [s] with the torque ``u`` [N m] held.
+class _Actuator:
+    """Torques in flight: each acts from its time on (zero-order hold), the newest wins."""
+
+    def __init__(self, delay: float, plant_dt: float) -> None:
+        self.delay_steps = round(delay / plant_dt)
+        self.queue: deque[tuple[int, float]] = deque()  # (plant step it acts from, torque)
+        self.u = 0.0
+
+    def command(self, k: int, u: float) -> None:
+        """The torque ``u`` computed at plant step ``k`` [N m]."""
+        self.queue.append((k + self.delay_steps, u))
+
+    def at(self, k: int) -> tuple[float, int]:
+        """Torque acting at plant step k, and the steps until the next change (or a lot)."""
+        while self.queue and self.queue[0][0] <= k:
+            self.u = self.queue.popleft()[1]
+        return self.u, (self.queue[0][0] - k) if self.queue else 1 << 30
+
+
+def _plant_period(x: FloatArray, t: float, k0: int, actuator: _Actuator, grid: _ControlGrid,
+                  camera: _Camera, pargs: tuple) -> tuple[FloatArray, int]:
+    """The plant over one control period from ``t`` [s] (plant step ``k0``).
 
     The RK4 runs in stretches that end at the camera's exposures, which are taken on the
-    plant grid. Returns the state at the period's end and the RK4 steps taken.
+    plant grid, and where the actuator's torque changes. Returns the state at the period's
+    end and the RK4 steps taken.
     """
     j = 0
     while j < grid.n_sub:
         tp = t + j * grid.plant_dt
         camera.expose_if_due(tp, x)
-        m = max(1, min(grid.n_sub - j, camera.steps_to_exposure(tp, grid.plant_dt)))
+        u, until = actuator.at(k0 + j)
+        m = max(1, min(grid.n_sub - j, camera.steps_to_exposure(tp, grid.plant_dt), until))
         x = rigid_rk4_steps(x, tp, grid.plant_dt, m, (u, *pargs))
         j += m
     return x, j
@@ -434,7 +463,7 @@ def _plant_period(x: FloatArray, t: float, u: float, grid: _ControlGrid, camera:
 
 def _control_loop(controller: OrbitalController, x: FloatArray, grid: _ControlGrid,
                   camera: _Camera, encoder: _Encoder, trace: _Trace, pargs: tuple,
-                  stop_on_failure: bool) -> _LoopEnd:
+                  stop_on_failure: bool, actuator: _Actuator, lead: float) -> _LoopEnd:
     """Run the control steps of ``grid`` from the true state ``x``, recording into ``trace``.
 
     Each step hands the controller the encoder reading and the camera frames delivered by
@@ -446,7 +475,8 @@ def _control_loop(controller: OrbitalController, x: FloatArray, grid: _ControlGr
         t = k * grid.period
         obs = camera.delivered(t)
         theta_m, theta_dot_m = encoder.read(x)
-        cmd = controller.step(t, theta_m, theta_dot_m, obs or None)
+        cmd = controller.step(t, theta_m, theta_dot_m, obs or None, lead=lead)
+        actuator.command(k * grid.n_sub, cmd.torque)
         trace.record(k, t, x, cmd)
         if cmd.mode == BALL_LOST and not lost_reason:
             lost_reason = cmd.reason
@@ -454,7 +484,7 @@ def _control_loop(controller: OrbitalController, x: FloatArray, grid: _ControlGr
             return _LoopEnd(steps=k + 1, plant_steps=plant_steps, lost_reason=lost_reason)
         if k == grid.n_steps - 1:
             break
-        x, m = _plant_period(x, t, cmd.torque, grid, camera, pargs)
+        x, m = _plant_period(x, t, k * grid.n_sub, actuator, grid, camera, pargs)
         plant_steps += m
         if not all(math.isfinite(v) for v in x[:4]):
             return _LoopEnd(steps=k + 1, plant_steps=plant_steps,
@@ -480,7 +510,7 @@ def _loop_result(controller: OrbitalController, trace: _Trace, camera: _Camera,
 def run_closed_loop(controller: OrbitalController, plant_params: RigParams, duration: float,
                     x0: FloatArray | None = None, sensors: SensorConfig | None = None,
                     seed: int = 0, plant_dt: float = 1e-3, control_rate: float | None = None,
-                    stop_on_failure: bool = False) -> LoopResult:
+                    stop_on_failure: bool = False, predict_delay: bool = True) -> LoopResult:
     """Simulate the closed loop (module docstring).
 
     Parameters
@@ -504,6 +534,8 @@ def run_closed_loop(controller: OrbitalController, plant_params: RigParams, dura
         rounded to a whole number of plant steps.
     stop_on_failure : bool
         End the run when the ball stops rolling (faster sweeps).
+    predict_delay : bool
+        Tell the controller the actuation delay (``lead``), as the controller node does.
     """
     sensors = sensors or SensorConfig()
     if not (math.isfinite(duration) and duration > 0.0):
@@ -518,8 +550,10 @@ def run_closed_loop(controller: OrbitalController, plant_params: RigParams, dura
     camera = _Camera(sensors, plant, rng)
     trace = _Trace(grid.n_steps)
     start = time.perf_counter()
+    actuator = _Actuator(sensors.actuation_delay, plant_dt)
+    lead = actuator.delay_steps * plant_dt if predict_delay else 0.0
     end = _control_loop(controller, x, grid, camera, _Encoder.of(sensors, rng), trace,
-                        plant.kernel_args, stop_on_failure)
+                        plant.kernel_args, stop_on_failure, actuator, lead)
     wall = time.perf_counter() - start
     info = {
         "seed": seed,

@@ -8,12 +8,22 @@ read. The types of the topic contract are known in advance; any other topic's ty
 looked up in the ROS graph until a publisher appears.
 
 The receive (log) time of each message is the node's clock, as ``ros2 bag record`` does:
-simulated time under ``use_sim_time:=true``. Subscriptions are best-effort with a deep
-queue, which matches reliable and best-effort publishers alike.
+simulated time under ``use_sim_time:=true``. Topic names are resolved like any other
+node's, so the remappings given to the rig's nodes (``-r camera/camera_info:=/cam/info``)
+given to the recorder too make it record the remapped topics.
 
-The writer flushes every ``recorder.flush_interval`` seconds and closes the bag on SIGINT or
-SIGTERM (a last flush, the MCAP summary and ``metadata.yaml``), so nothing received is
-lost; it then logs the message count per topic.
+Nothing the publishers sent while it ran is lost:
+
+- it subscribes to every topic of the contract at start, so a rig that waits for its
+  subscriptions before it starts (``bfr rig`` does) loses nothing at the beginning;
+- QoS follows the publishers, as ``ros2 bag record`` does: each subscription starts
+  reliable with a deep queue (``recorder.depth``); when a best-effort publisher appears on
+  its topic (a camera driver's sensor-data QoS), which a reliable subscription cannot
+  match, it is made again best effort, and the log says so;
+- on SIGINT/SIGTERM it keeps taking messages until none has arrived for
+  ``recorder.drain_quiet`` seconds (at most ``recorder.drain_timeout``), then closes the bag
+  (a last flush, the MCAP summary and ``metadata.yaml``) and logs the message count per
+  topic (``recorded: /topic N, ...``).
 """
 
 from __future__ import annotations
@@ -28,6 +38,7 @@ from bfr_model.io.bag import BagWriter
 from bfr_model.param_file import config_path
 from bfr_ros.node_common import (
     declare_parameter_tree,
+    format_published,
     load_yaml_parameters,
     read_parameter_tree,
     run_node,
@@ -47,6 +58,9 @@ CONTRACT_TYPES: dict[str, str] = {
     "camera/camera_info": "sensor_msgs/msg/CameraInfo",
     "camera/image_raw": "sensor_msgs/msg/Image",
     "clock": "rosgraph_msgs/msg/Clock",
+    "sim_markers": "visualization_msgs/msg/MarkerArray",
+    "ball_markers": "visualization_msgs/msg/MarkerArray",
+    "camera/detection": "visualization_msgs/msg/ImageMarker",
 }
 
 
@@ -71,12 +85,16 @@ class RecorderNode(Node):
         p = read_parameter_tree(self, self.defaults)["recorder"]
         path = str(p["path"]) or datetime.now().strftime("bfr_%Y%m%d_%H%M%S")
         self.depth = int(p["depth"])
+        self.drain_quiet = float(p["drain_quiet"])
+        self.drain_timeout = float(p["drain_timeout"])
         self.bag = BagWriter(Path(path), flush_interval=float(p["flush_interval"]),
                              custom_data={"recorded_by": "bfr_sim recorder_node"})
         self.wanted: dict[str, str] = {}  # resolved topic -> configured name
         for topic in p["topics"]:
             self.wanted[self.resolve_topic_name(str(topic))] = str(topic)
         self.subs: dict[str, Any] = {}
+        self.reliable: dict[str, bool] = {}
+        self.last_msg = time.monotonic()
         self.types: dict[str, str] = {}
         self.counts: dict[str, int] = {}
         for resolved, name in self.wanted.items():
@@ -91,7 +109,7 @@ class RecorderNode(Node):
             f"recording {len(self.wanted)} topic(s) into {self.bag.path}: "
             + ", ".join(sorted(self.wanted)))
 
-    def _subscribe(self, topic: str, type_name: str) -> None:
+    def _subscribe(self, topic: str, type_name: str, reliable: bool = True) -> None:
         try:
             cls = message_class(type_name)
         except (ImportError, AttributeError, ValueError) as exc:
@@ -99,19 +117,36 @@ class RecorderNode(Node):
                                     f"({exc})", throttle_duration_sec=10.0)
             return
         qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=self.depth,
-                         reliability=ReliabilityPolicy.BEST_EFFORT,
+                         reliability=(ReliabilityPolicy.RELIABLE if reliable
+                                      else ReliabilityPolicy.BEST_EFFORT),
                          durability=DurabilityPolicy.VOLATILE)
-        self.types[topic] = type_name
-        self.counts[topic] = 0
-        self.bag.add_topic(topic, type_name)
+        if topic not in self.types:
+            self.types[topic] = type_name
+            self.counts[topic] = 0
+            self.bag.add_topic(topic, type_name)
 
         def callback(data: bytes, topic: str = topic, type_name: str = type_name) -> None:
             self.bag.write(topic, type_name, data, max(self.get_clock().now().nanoseconds, 0))
             self.counts[topic] += 1
+            self.last_msg = time.monotonic()
 
         self.subs[topic] = self.create_subscription(cls, topic, callback, qos, raw=True)
+        self.reliable[topic] = reliable
+
+    def _adapt_qos(self) -> None:
+        """A best-effort publisher on a reliably subscribed topic: subscribe best effort."""
+        for topic, sub in list(self.subs.items()):
+            if not self.reliable.get(topic):
+                continue
+            infos = self.get_publishers_info_by_topic(topic)
+            if any(i.qos_profile.reliability == ReliabilityPolicy.BEST_EFFORT for i in infos):
+                self.destroy_subscription(sub)
+                self._subscribe(topic, self.types[topic], reliable=False)
+                self.get_logger().info(f"{topic}: a publisher offers best effort only; "
+                                       f"recording it best effort")
 
     def _discover(self) -> None:
+        self._adapt_qos()
         missing = [t for t in self.wanted if t not in self.subs]
         if not missing:
             return
@@ -125,15 +160,37 @@ class RecorderNode(Node):
                 self._subscribe(topic, types[0])
                 self.get_logger().info(f"recording {topic} ({types[0]})")
 
+    def drain(self) -> float:
+        """Take what is still queued or in flight; returns the time it took [s].
+
+        Spins until ``drain_quiet`` seconds pass without a message (at most
+        ``drain_timeout`` seconds).
+        """
+        ex = self.executor_ref
+        t0 = time.monotonic()
+        if ex is None:
+            return 0.0
+        self.last_msg = max(self.last_msg, t0 - self.drain_quiet / 2.0)
+        while True:
+            now = time.monotonic()
+            if now - self.last_msg >= self.drain_quiet or now - t0 >= self.drain_timeout:
+                return now - t0
+            ex.spin_once(timeout_sec=0.02)
+
     def on_shutdown(self) -> None:
-        """Close the bag (flush, summary, metadata.yaml) and log the counts."""
+        """Drain, close the bag (flush, summary, metadata.yaml) and log the counts."""
+        n0 = self.bag.message_count
+        took = self.drain()
         self.bag.close()
         wall = time.monotonic() - self.t_start
         counts = ", ".join(f"{t}: {n}" for t, n in sorted(self.counts.items()))
         missing = [t for t in self.wanted if t not in self.subs]
         self.get_logger().info(
             f"bag {self.bag.path} closed: {self.bag.message_count} messages in {wall:.1f} s "
-            f"({counts})" + (f"; never seen: {', '.join(missing)}" if missing else ""))
+            f"({counts}; {self.bag.message_count - n0} taken while draining for {took:.2f} s)"
+            + (f"; never seen: {', '.join(missing)}" if missing else ""))
+        self.get_logger().info(format_published(dict(sorted(self.counts.items())))
+                               .replace("published: ", "recorded: ", 1))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -13,6 +13,7 @@ topic                             type                                 direction
 ``camera/camera_info``            ``sensor_msgs/CameraInfo``           out (camera rate)
 ``sim_truth``                     ``bfr_interfaces/SimTruth``          out (optional)
 ``/clock``                        ``rosgraph_msgs/Clock``              out
+``sim_markers``                   ``visualization_msgs/MarkerArray``   out (``markers.rate``)
 ``effort_controller/commands``    ``std_msgs/Float64MultiArray``       in (never published)
 ``controller_state``              ``bfr_interfaces/ControllerState``   in (lock-step only)
 ================================  ===================================  ===================
@@ -20,8 +21,14 @@ topic                             type                                 direction
 Modes (``sim.mode``)
 --------------------
 ``realtime``
-    Simulated time advances with the wall clock (times ``sim.real_time_factor``); the
-    latest effort command is applied from the next step on (zero-order hold).
+    Simulated time advances with the wall clock (times ``sim.real_time_factor``); every
+    message that has arrived is taken before each RK4 step, so the latest effort command
+    acts from the next step on (zero-order hold), as a drive applies it. (Taking one
+    message per camera frame instead, as this node did, let commands queue up whenever the
+    simulation ran behind real time, and the torque then acted tens of milliseconds after
+    the frame it answered: the cause of the ball lost in real time, docs/notes/issue-17.md.)
+    When it falls behind real time it runs flat out to catch up (simulated time stays
+    consistent for every node on ``/clock``) and drops the lag only beyond 1 s.
 ``lockstep``
     As fast as the loop allows: after publishing a camera frame at simulated time ``t``
     the simulator waits until the controller has answered that frame, i.e. a
@@ -56,12 +63,16 @@ from bfr_model.dynamics import RigidModel, curve_terms
 from bfr_model.layout import I_CW, I_SW
 from bfr_model.param_file import check, config_path, nonnegative, one_of, positive
 from bfr_model.params import RigParams, default_params_path, params_from_dict
+from bfr_model.scene import MarkerSpec, rig_markers, rig_picture
+from bfr_ros.markers import MarkerPublisher
 from bfr_ros.node_common import (
     CLOCK_QOS,
     COMMAND_QOS,
     IMAGE_QOS,
     STATE_QOS,
     declare_parameter_tree,
+    flatten,
+    format_published,
     load_yaml_parameters,
     ns_to_stamp,
     read_parameter_tree,
@@ -265,7 +276,9 @@ class SimulatorNode(Node):
     def __init__(self) -> None:
         super().__init__("simulator")
         self.defaults = node_defaults()
-        declare_parameter_tree(self, self.defaults)
+        # camera.yaml may be given whole: its detector.* group is the camera node's
+        declare_parameter_tree(self, self.defaults,
+                               flatten(load_yaml_parameters(default_camera_path())))
         p = read_parameter_tree(self, self.defaults)
         rig = {k: p[k] for k in ("ball", "frame", "environment", "joint", "actuator",
                                  "track", "contact") if k in p}
@@ -305,6 +318,8 @@ class SimulatorNode(Node):
         self.last_frame: tuple[Any, int] | None = None
         st = p["start"]
         self.wait_subscribers = int(st["wait_subscribers"])
+        self.wait_info_subscribers = int(st["wait_info_subscribers"])
+        self.wait_truth_subscribers = int(st["wait_truth_subscribers"])
         self.wait_controller = bool(st["wait_controller"])
         self.start_timeout = float(st["timeout"])
         info = self.camera.to_camera_info()
@@ -314,15 +329,23 @@ class SimulatorNode(Node):
             setattr(self.info_msg, key, info[key])
         self.info_msg.header.frame_id = info["frame_id"]
         # publishers and subscriptions (relative names: remappable, namespaceable)
-        self.js_pub = self.create_publisher(JointState, "joint_states", COMMAND_QOS)
+        # reliable, keep last 100: a recorder that falls a few ms behind loses nothing
+        self.js_pub = self.create_publisher(JointState, "joint_states", STATE_QOS)
         self.img_pub = self.create_publisher(Image, "camera/image_raw", IMAGE_QOS)
         self.info_pub = self.create_publisher(CameraInfo, "camera/camera_info", IMAGE_QOS)
         self.truth_pub = self.create_publisher(SimTruth, "sim_truth", STATE_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", CLOCK_QOS)
+        mk = p["markers"]  # the scene for Foxglove / RViz (bfr_model.scene); rate 0: off
+        self.markers = MarkerPublisher(self, "sim_markers", float(mk["rate"]), str(mk["frame_id"]))
         self.cmd_sub = self.create_subscription(
             Float64MultiArray, "effort_controller/commands", self._on_command, COMMAND_QOS)
-        self.state_sub = self.create_subscription(
+        # controller_state is read in lock-step only (the answer to a frame); the start waits
+        # for a controller in either mode through the graph
+        self.state_topic = self.resolve_topic_name("controller_state")
+        self.state_sub = (self.create_subscription(
             ControllerState, "controller_state", self._on_state, STATE_QOS)
+            if self.mode == "lockstep" else None)
+        self.events = 0  # messages taken (commands, states)
         self.clock_msg = Clock()
         self.js_msg = JointState()
         self.js_msg.name = [self.joint_name]
@@ -331,7 +354,7 @@ class SimulatorNode(Node):
         self.state_torque = math.nan
         self.controller_absent = False
         self.absent_check_ns = 0
-        self.stats = {"frames": 0, "joint_states": 0, "truth": 0, "commands": 0,
+        self.stats = {"frames": 0, "joint_states": 0, "truth": 0, "clock": 0, "commands": 0,
                       "ignored_commands": 0, "lockstep_waits": 0, "lockstep_timeouts": 0,
                       "resent": 0, "wait_wall": 0.0}
         self.finished = False
@@ -346,6 +369,7 @@ class SimulatorNode(Node):
 
     # -- subscriptions --------------------------------------------------------------
     def _on_command(self, msg: Any) -> None:
+        self.events += 1
         why = self.sim.set_command(msg.data)
         if why:
             self.stats["ignored_commands"] += 1
@@ -355,6 +379,7 @@ class SimulatorNode(Node):
             self.stats["commands"] += 1
 
     def _on_state(self, msg: Any) -> None:
+        self.events += 1
         if msg.mode == ControllerState.FAULT:
             return  # a controller in FAULT (e.g. its watchdog) does not answer a frame
         self.state_ns = max(self.state_ns, stamp_to_ns(msg.header.stamp))
@@ -369,6 +394,7 @@ class SimulatorNode(Node):
             m = self.clock_msg
             ns_to_stamp(t_ns, m.clock)
             self.clock_pub.publish(m)
+            self.stats["clock"] += 1
 
     def _publish_joint_state(self, t_ns: int) -> None:
         m = self.js_msg
@@ -421,9 +447,22 @@ class SimulatorNode(Node):
         self.info_pub.publish(info)
         self.stats["frames"] += 1
 
+    def scene_markers(self) -> list[MarkerSpec]:
+        """The markers of the current state: frame, ball (the truth's centre), contacts, label."""
+        ball, _ = self.sim.ball_kinematics()
+        x = self.sim.x
+        b = self.rig_params.ball
+        pic = rig_picture(self.sim.model.curve, float(x[0]), phi=float(x[1]), ball_xy=ball[:2],
+                          ball_z=float(ball[2]), ball_radius=b.radius,
+                          plate_distance=b.plate_distance)
+        return rig_markers(pic, label=f"t {self.sim.t:.2f} s  torque "
+                                      f"{self.sim.applied_torque:+.4f} N m")
+
     def publish_due(self) -> bool:
         """Publish what is due at the current step; True if a frame went out."""
         t_ns = self.sim.t_ns
+        if self.markers.due(t_ns):
+            self.markers.publish(self.scene_markers(), t_ns)
         if self.pub_images and self.frame_sched.due(t_ns):
             self._render(t_ns)
         frame_out = bool(self.pending) and self.pending[0][0] <= t_ns
@@ -491,27 +530,42 @@ class SimulatorNode(Node):
             ex.spin_once(timeout_sec=max(0.0, min(0.05, deadline - now, resend - now)))
         self.stats["wait_wall"] += time.monotonic() - t0
 
+    def take_messages(self, limit: int = 100) -> None:
+        """Take every message that has arrived (at most ``limit``): the newest command acts."""
+        ex = self.executor_ref
+        for _ in range(limit):
+            n = self.events
+            ex.spin_once(timeout_sec=0.0)
+            if self.events == n:
+                return
+
     def wait_for_peers(self, stop: Any) -> None:
         """Before t = 0: wait for subscribers / the controller (``start.*``)."""
-        need_ctrl = self.mode == "lockstep" and self.wait_controller
-        if self.wait_subscribers <= 0 and not need_ctrl:
+        need_ctrl = self.wait_controller
+        waits = [(self.js_pub, self.wait_subscribers), (self.info_pub, self.wait_info_subscribers),
+                 (self.truth_pub, self.wait_truth_subscribers)]
+        if all(n <= 0 for _, n in waits) and not need_ctrl:
             return
         ex = self.executor_ref
         deadline = time.monotonic() + self.start_timeout
         self.get_logger().info(
-            f"waiting for {self.wait_subscribers} joint_states subscriber(s)"
-            + (" and a controller" if need_ctrl else "") + " before starting")
+            "waiting for " + ", ".join(f"{n} subscriber(s) of {pub.topic_name}"
+                                       for pub, n in waits if n > 0)
+            + (f" and a controller ({self.state_topic})" if need_ctrl else "")
+            + " before starting")
 
         def ready() -> bool:
-            return (self.js_pub.get_subscription_count() >= self.wait_subscribers
-                    and (not need_ctrl or self.state_sub.get_publisher_count() > 0))
+            return (all(pub.get_subscription_count() >= n for pub, n in waits)
+                    and (not need_ctrl or self.count_publishers(self.state_topic) > 0))
 
         while not stop and not ready():
             if time.monotonic() > deadline:
                 self.get_logger().warn(
-                    f"start: peers missing after {self.start_timeout:g} s "
-                    f"({self.js_pub.get_subscription_count()} joint_states subscriber(s), "
-                    f"{self.state_sub.get_publisher_count()} controller(s)); starting anyway")
+                    f"start: peers missing after {self.start_timeout:g} s ("
+                    + ", ".join(f"{pub.get_subscription_count()} subscriber(s) of "
+                                f"{pub.topic_name}" for pub, _ in waits)
+                    + f", {self.count_publishers(self.state_topic)} controller(s)); starting "
+                      f"anyway")
                 return
             ex.spin_once(timeout_sec=0.05)
         # let the remaining endpoints of the same participants match
@@ -544,8 +598,7 @@ class SimulatorNode(Node):
                 while now < target and not stop:
                     ex.spin_once(timeout_sec=target - now)
                     now = time.monotonic()
-                if frame_out:
-                    ex.spin_once(timeout_sec=0.0)
+                self.take_messages()
             if self.duration_ns and self.sim.t_ns >= self.duration_ns:
                 self.finished = True
                 break
@@ -575,6 +628,12 @@ class SimulatorNode(Node):
             f"truth, {st['commands']} commands ({st['ignored_commands']} ignored), "
             f"lock-step: {st['lockstep_waits']} waits, {st['lockstep_timeouts']} "
             f"timeouts, {st['resent']} frames re-sent, {st['wait_wall']:.1f} s waiting")
+        self.get_logger().info(format_published({
+            self.js_pub.topic_name: st["joint_states"],
+            self.img_pub.topic_name: st["frames"] + st["resent"],
+            self.info_pub.topic_name: st["frames"] + st["resent"],
+            self.truth_pub.topic_name: st["truth"],
+            self.clock_pub.topic_name: st["clock"]}))
 
 
 

@@ -56,6 +56,13 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
     ),
     "camera-eval": ("bfr_tools.camera_eval", "main", "ball detector: accuracy and speed figures"),
     "bench": ("bfr_tools.bench", "main", "performance figures side by side, with budgets"),
+    "warm": ("bfr_tools.warm", "main",
+             "compile and cache the nodes' kernels and gains (scripts/setup runs it)"),
+    "video": (
+        "bfr_tools.video",
+        "main",
+        "render a recording (bag, CSV, rig log) as a video of the rig seen from the front",
+    ),
     "analyze": (
         "bfr_tools.analysis.cli",
         "main",

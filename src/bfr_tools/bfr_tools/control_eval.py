@@ -20,6 +20,20 @@ from one version to the next.
   latency; success = keeps rolling. R is changed through the ball radius at a fixed plate
   distance, ``R_b = sqrt(R^2 + d_f^2 / 4)``, the ball's inertia unchanged.
 
+The real rig's effects, each alone, in absolute units (issue 17: the ball must keep rolling
+with joint dry friction 2 mN m, 0.56x frame inertia, 8 ms camera latency, a rolling radius
+1 mm smaller, a contour 5 mm larger in mean radius); same start and success test as the
+latency, with an actuation delay of ``--actuation-delay`` (default 5 ms: the torque acts
+5 ms after the sample it answers, predicted through by the controller):
+
+- ``coulomb_max`` [N m]: joint dry friction ``joint.coulomb_friction`` of the plant;
+- ``inertia_min_ratio`` [-]: the smallest plant/controller frame-inertia ratio (reported
+  as the ratio, bisected on ``1 - ratio``);
+- ``rolling_radius_minus`` [m]: a rolling radius this much smaller;
+- ``contour_plus`` [m]: a contour this much larger in mean radius (``frame.contour.a``);
+- ``actuation_delay_max`` [s]: the delay from sample to torque, predicted through
+  (``lead``), and ``actuation_delay_max_unpredicted`` without the prediction.
+
 Example::
 
     bfr control-eval --json                 # default: 3 seeds, 6 bisection steps, 10 s trials
@@ -93,8 +107,12 @@ def bisect_limit(ok: Callable[[float], bool], upper: float, steps: int) -> tuple
 
 
 def evaluate(params: RigParams, controller: OrbitalController, settings: EvalSettings,
-             only: tuple[str, ...] = (), log: Callable[[str], None] | None = None) -> dict:
-    """Measure the figures (module docstring); returns a JSON-ready dict."""
+             only: tuple[str, ...] = (), log: Callable[[str], None] | None = None,
+             actuation_delay: float = 0.005) -> dict:
+    """Measure the figures (module docstring); returns a JSON-ready dict.
+
+    ``actuation_delay`` [s] is the delay of the real-rig effect figures.
+    """
     st = settings
     trials = {"count": 0}
 
@@ -154,6 +172,41 @@ def evaluate(params: RigParams, controller: OrbitalController, settings: EvalSet
             return all_ok(lambda seed: (plant, small_start(seed), nominal_sensors), False)
         return ok
 
+    act = SensorConfig(actuation_delay=actuation_delay)
+
+    def coulomb_ok(v: float) -> bool:
+        plant = params.replace(**{"joint.coulomb_friction": v})
+        return all_ok(lambda seed: (plant, small_start(seed), act), False)
+
+    def inertia_ok(v: float) -> bool:
+        plant = params.replace(**{"frame.inertia": params.frame.inertia * (1.0 - v)})
+        return all_ok(lambda seed: (plant, small_start(seed), act), False)
+
+    def radius_ok(v: float) -> bool:
+        r = params.ball.rolling_radius
+        try:
+            plant = scale_rolling_radius(params, (r - v) / r)
+        except ParameterError:
+            return False
+        return all_ok(lambda seed: (plant, small_start(seed), act), False)
+
+    def contour_ok(v: float) -> bool:
+        plant = params.replace(**{"frame.contour.a": params.frame.contour.a + v})
+        return all_ok(lambda seed: (plant, small_start(seed), act), False)
+
+    def delay_ok(predict: bool) -> Callable[[float], bool]:
+        def ok(v: float) -> bool:
+            sensors = SensorConfig(actuation_delay=v)
+            for seed in range(st.seeds):
+                trials["count"] += 1
+                res = run_closed_loop(controller, params, st.trial, small_start(seed),
+                                      sensors=sensors, seed=seed, stop_on_failure=True,
+                                      predict_delay=predict)
+                if res.failure_time is not None or res.t[-1] < st.trial - 1e-6:
+                    return False
+            return True
+        return ok
+
     def r_ok(sign: float) -> Callable[[float], bool]:
         def ok(v: float) -> bool:
             try:
@@ -171,6 +224,12 @@ def evaluate(params: RigParams, controller: OrbitalController, settings: EvalSet
         ("J_f_minus", jf_ok(-1.0), 0.9, "-"),
         ("R_plus", r_ok(1.0), 0.5, "-"),
         ("R_minus", r_ok(-1.0), 0.5, "-"),
+        ("coulomb_max", coulomb_ok, 0.02, "N m"),
+        ("inertia_min_ratio", inertia_ok, 0.9, "-"),
+        ("rolling_radius_minus", radius_ok, 4e-3, "m"),
+        ("contour_plus", contour_ok, 0.02, "m"),
+        ("actuation_delay_max", delay_ok(True), 0.1, "s"),
+        ("actuation_delay_max_unpredicted", delay_ok(False), 0.1, "s"),
     ]
     for name, ok, upper, unit in figures:
         if only and not any(name.startswith(o) for o in only):
@@ -178,6 +237,8 @@ def evaluate(params: RigParams, controller: OrbitalController, settings: EvalSet
         t0 = time.perf_counter()
         n0 = trials["count"]
         value, capped = bisect_limit(ok, upper, st.steps)
+        if name == "inertia_min_ratio":  # bisected on 1 - ratio: report the ratio
+            value = 1.0 - value
         out[name] = {"value": value, "at_upper_limit": capped, "upper_limit": upper,
                      "resolution": upper / 2 ** st.steps, "unit": unit,
                      "trials": trials["count"] - n0,
@@ -205,7 +266,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--trial", type=float, default=EvalSettings.trial,
                    help="simulated seconds per trial (default %(default)s)")
     p.add_argument("--only", nargs="*", default=[],
-                   help="only these figures (prefixes of y_max z_max latency_max J_f R)")
+                   help="only these figures (prefixes of y_max z_max latency_max J_f R "
+                        "coulomb_max inertia_min_ratio rolling_radius_minus contour_plus "
+                        "actuation_delay_max)")
+    p.add_argument("--actuation-delay", type=float, default=0.005,
+                   help="actuation delay [s] of the real-rig effect figures (default "
+                        "%(default)s)")
     p.add_argument("--params", type=Path,
                    help="rig parameters (default: bfr_model's config/rig.yaml)")
     p.add_argument("--config", type=Path, help="controller.yaml (default: the shipped one)")
@@ -230,14 +296,20 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     settings = EvalSettings(seeds=args.seeds, steps=args.steps, trial=args.trial)
     log = None if args.json else (lambda s: print(s, flush=True))
-    figures = evaluate(params, controller, settings, tuple(args.only), log)
+    if not 0.0 <= args.actuation_delay < 1.0:
+        print("bfr control-eval: error: --actuation-delay must be in [0, 1) s", file=sys.stderr)
+        return 2
+    figures = evaluate(params, controller, settings, tuple(args.only), log,
+                       actuation_delay=args.actuation_delay)
     result = {
         "figures": figures,
         "settings": {"seeds": settings.seeds, "steps": settings.steps,
                      "trial": settings.trial, "tail": settings.tail,
                      "y_tail": settings.y_tail, "z_tail": settings.z_tail,
                      "sensors": "camera 200 Hz, 5 ms latency, 0.1 mm noise; control "
-                                f"{config.control.rate:g} Hz; plant RK4 1 kHz"},
+                                f"{config.control.rate:g} Hz; plant RK4 1 kHz; real-rig effect "
+                                f"figures with a {1e3 * args.actuation_delay:g} ms actuation "
+                                f"delay"},
         "controller": controller.summary(),
         "wall_time": round(time.perf_counter() - start, 2),
     }

@@ -28,15 +28,14 @@ Examples::
 from __future__ import annotations
 
 import argparse
-import fcntl
 import json
 import math
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
-import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -51,6 +50,8 @@ from bfr_control.orbit import PeriodicOrbit
 from bfr_model.dynamics import RigidModel
 from bfr_model.io.bag import make_typestore, read_bag_messages
 from bfr_model.params import load_params
+from bfr_ros.domain import claim_domain_id
+from bfr_ros.node_common import parse_published
 
 from bfr_tools.run import executable_path
 
@@ -102,31 +103,6 @@ def orbit_start(phase: float = 0.3, d_theta: float = 0.05, rig_params: str | Non
                     (float(v) for v in x), strict=True))
 
 
-_DOMAIN_LOCK: IO[str] | None = None
-
-
-def claim_domain_id() -> int:
-    """A ROS domain id that no other bfr process on this machine uses (1..101).
-
-    The claim is an exclusive ``flock`` on ``<tmp>/bfr-ros-domain-<id>.lock``, held for the
-    rest of this process's life: the same scheme as the test suite's (tests/rosutil.py), so a
-    rig and a test run never share a domain.
-    """
-    global _DOMAIN_LOCK  # noqa: PLW0603 - one claim per process
-    start = os.getpid() % 101
-    for k in range(101):
-        domain = 1 + (start + k) % 101
-        handle = (Path(tempfile.gettempdir()) / f"bfr-ros-domain-{domain}.lock").open("a")
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        _DOMAIN_LOCK = handle
-        return domain
-    raise RigError("no free ROS_DOMAIN_ID in 1..101 on this machine")
-
-
 # -- processes ---------------------------------------------------------------------------------
 @dataclass
 class NodeSpec:
@@ -145,11 +121,19 @@ class NodeSpec:
         exe = executable_path(self.package, self.executable)
         return [str(exe), "--ros-args", "-r", f"__node:={self.name}", *self.ros_args]
 
-    def start(self, log_dir: Path, env: dict[str, str]) -> None:
-        """Start the process with stdout and stderr into ``<log_dir>/<name>.log``."""
+    def start(self, log_dir: Path, env: dict[str, str], nice: int = 0) -> None:
+        """Start the process with stdout and stderr into ``<log_dir>/<name>.log``.
+
+        ``nice`` < 0 raises its scheduling priority before it runs (every thread it starts
+        inherits it), where the system permits; else it runs at the normal priority.
+        """
         self.log_path = log_dir / f"{self.name}.log"
         self.log = self.log_path.open("wb")
-        self.process = subprocess.Popen(self.command(), env=env, stdin=subprocess.DEVNULL,
+        command = self.command()
+        tool = shutil.which("nice") if nice else None
+        if tool:  # nice(1) execs the node: same pid, signals reach it
+            command = [tool, "-n", str(nice), *command]
+        self.process = subprocess.Popen(command, env=env, stdin=subprocess.DEVNULL,
                                         stdout=self.log, stderr=subprocess.STDOUT)
 
     @property
@@ -192,6 +176,25 @@ def _describe_exit(code: int) -> str:
         except ValueError:
             return f"killed by signal {-code}"
     return f"exit status {code}"
+
+
+def _may_raise_priority(nice: int) -> bool:
+    """Whether this process may start children at niceness ``nice`` (< 0: CAP_SYS_NICE)."""
+    try:
+        return os.getpriority(os.PRIO_PROCESS, 0) + nice >= -20 and (
+            os.geteuid() == 0 or nice >= 0)
+    except OSError:
+        return False
+
+
+def published_counts(nodes: dict[str, NodeSpec]) -> dict[str, int]:
+    """Messages each node says it published, per resolved topic (from their logs)."""
+    out: dict[str, int] = {}
+    for name, spec in nodes.items():
+        if name == "recorder" or spec.log_path is None or not spec.log_path.exists():
+            continue
+        out.update(parse_published(spec.log_path.read_text(errors="replace")))
+    return out
 
 
 def _wall_stats(log_path: Path | None) -> tuple[float, float] | None:
@@ -442,9 +445,13 @@ def format_summary(s: dict[str, Any], wall: tuple[float, float] | None = None) -
     if wall is not None:
         lines.append(f"simulator: {dur:.1f} s simulated in {wall[0]:.1f} s of wall time "
                      f"(real-time factor {wall[1]:.2f})")
-    lines.append("topics (count, rate in simulated time):")
+    published = s.get("published", {})
+    lines.append("topics (recorded / published, rate in simulated time):")
     for topic, d in s["topics"].items():
-        lines.append(f"  {topic:<30} {d['count']:>7}  {d['rate']:8.1f} Hz  {d['type']}")
+        pub = published.get(topic)
+        both = f"{d['count']:>7} / {pub if pub is not None else '?':>7}"
+        flag = "" if pub is None or pub == d["count"] else f"  ({pub - d['count']:+d} lost)"
+        lines.append(f"  {topic:<30} {both}  {d['rate']:8.1f} Hz  {d['type']}{flag}")
     return "\n".join(lines)
 
 
@@ -484,6 +491,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--domain", default=None, metavar="auto|ID",
                    help="ROS_DOMAIN_ID for the nodes: a number, or 'auto' for a free one with "
                         "localhost-only discovery (default: the environment's)")
+    p.add_argument("--nice", type=int, default=-10, metavar="N",
+                   help="realtime: start the nodes at this niceness (default -10: above the "
+                        "machine's other work, as a real-time control loop runs; needs the "
+                        "permission to raise priorities, else normal priority with a note)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     return p
 
@@ -502,9 +513,15 @@ def _node_args(args: argparse.Namespace, log_dir: Path, bag: Path | None,
             per[n] += ["--params-file", str(args.camera_params)]
     if args.controller_params:
         per["controller"] += ["--params-file", str(args.controller_params)]
-    subscribers = 2 + (bag is not None)  # camera, controller, recorder on joint_states
+    rec = int(bag is not None)
+    # the simulator starts when every subscriber is there: camera, controller and recorder
+    # on joint_states, camera and recorder on camera_info, the recorder on sim_truth, and the
+    # controller has finished loading (its controller_state publisher is up)
     per["simulator"] += ["-p", f"sim.mode:={args.mode}", "-p", f"sim.duration:={args.duration}",
-                         "-p", f"start.wait_subscribers:={subscribers}"]
+                         "-p", f"start.wait_subscribers:={2 + rec}",
+                         "-p", f"start.wait_info_subscribers:={1 + rec}",
+                         "-p", f"start.wait_truth_subscribers:={rec}",
+                         "-p", "start.wait_controller:=true"]
     per["simulator"] += [a for k, v in start.items() for a in ("-p", f"{k}:={v!r}")]
     per["controller"] += ["-p", "loop.trigger:=observation"]
     # wall-clock watchdogs: in lock-step a gap only means a slow machine, and this command
@@ -544,6 +561,12 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
         env["ROS_DOMAIN_ID"] = args.domain
     order = [n for n in ("recorder", "camera", "controller", "simulator")
              if n != "recorder" or bag is not None]
+    nice = args.nice if args.mode == "realtime" else 0
+    if nice < 0 and not _may_raise_priority(nice):
+        print(f"bfr rig: note: raising the nodes' priority (nice {nice}) is not permitted "
+              f"here; they run at normal priority and a busy machine may slow the "
+              f"simulation down", flush=True)
+        nice = 0
     nodes = {n: NodeSpec(n, *NODES[n], per[n]) for n in order}
     wall_limit = args.wall_timeout or (
         120.0 + (args.duration * 10.0 if args.mode == "lockstep" else args.duration * 2.0))
@@ -557,7 +580,7 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
     interrupted = False
     try:
         for n in order:
-            nodes[n].start(log_dir, env)
+            nodes[n].start(log_dir, env, nice)
             print(f"bfr rig: started {n} ({nodes[n].package}/{nodes[n].executable}, pid "
                   f"{nodes[n].process.pid})", flush=True)  # type: ignore[union-attr]
         sim = nodes["simulator"]
@@ -594,6 +617,7 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
         summary = summarize_bag(bag)
         summary["mode"] = args.mode
         summary["interrupted"] = interrupted
+        summary["published"] = published_counts(nodes)
         if wall is not None:
             summary["wall_time"], summary["real_time_factor"] = wall
     return summary, log_dir, bag, wall

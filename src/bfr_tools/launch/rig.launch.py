@@ -8,7 +8,14 @@ controller's orbit at contact angle ``phase`` with the frame ``d_theta`` off it.
 
 Real rig (``hardware:=true``): only the camera and controller nodes, against the drivers'
 topics (docs/hardware.md): ``image_topic``/``camera_info_topic`` of the camera driver,
-ros2_control's ``/joint_states`` and ``/effort_controller/commands``.
+ros2_control's ``/joint_states`` and ``/effort_controller/commands``. The recorder (with
+``record:=``) gets the same remappings and hardware.yaml's topic list, so it records the
+topics the hardware has (no ``sim_truth``) under the names the remappings give them.
+
+The default mode, ``realtime``, is the real rig's: the simulator paces itself by the wall
+clock, the controller predicts through the measured delay from a sample to its torque, and
+the ball keeps rolling on a busy 2-core machine (docs/notes/issue-17.md); ``lockstep``
+remains for bit-for-bit repeatable runs.
 
     ros2 launch bfr_tools rig.launch.py hardware:=true camera_params:=my_camera.yaml \
         image_topic:=/cam/image_raw camera_info_topic:=/cam/camera_info
@@ -44,25 +51,28 @@ def _nodes(context: Any) -> list[Any]:
     controller = _config("bfr_control", "controller.yaml")
     controller_node = _config("bfr_control", "controller_node.yaml")
     nodes = []
+    remaps: list[tuple[str, str]] = []
+    hw = _config("bfr_control", "hardware.yaml")
     if hardware:
-        hw = _config("bfr_control", "hardware.yaml")
+        remaps = [("camera/image_raw", arg("image_topic")),
+                  ("camera/camera_info", arg("camera_info_topic"))]
         nodes.append(Node(
             package="bfr_camera", executable="camera_node", name="camera", output="screen",
-            parameters=[camera, rig, camera_node, hw],
-            remappings=[("camera/image_raw", arg("image_topic")),
-                        ("camera/camera_info", arg("camera_info_topic"))]))
+            parameters=[camera, rig, camera_node, hw], remappings=remaps))
         nodes.append(Node(
             package="bfr_control", executable="controller_node", name="controller",
             output="screen", parameters=[rig, controller, controller_node, hw]))
         sim_time = {"use_sim_time": False}
     else:
         start = orbit_start(float(arg("phase")), float(arg("d_theta")))
-        subscribers = 3 if record else 2
+        rec = 1 if record else 0
         nodes.append(Node(
             package="bfr_sim", executable="simulator_node", name="simulator", output="screen",
             parameters=[rig, camera, _config("bfr_sim", "simulator_node.yaml"),
-                        {"sim.mode": arg("mode"), "start.wait_subscribers": subscribers,
-                         **start}]))
+                        {"sim.mode": arg("mode"), "start.wait_subscribers": 2 + rec,
+                         "start.wait_info_subscribers": 1 + rec,
+                         "start.wait_truth_subscribers": rec,
+                         "start.wait_controller": True, **start}]))
         sim_time = {"use_sim_time": True}
         nodes.append(Node(
             package="bfr_camera", executable="camera_node", name="camera", output="screen",
@@ -73,8 +83,9 @@ def _nodes(context: Any) -> list[Any]:
     if record:
         nodes.append(Node(
             package="bfr_sim", executable="recorder_node", name="recorder", output="screen",
-            parameters=[_config("bfr_sim", "recorder_node.yaml"),
-                        {"recorder.path": record, **sim_time}]))
+            parameters=[_config("bfr_sim", "recorder_node.yaml"), *([hw] if hardware else []),
+                        {"recorder.path": record, **sim_time}],
+            remappings=remaps))
     return nodes
 
 

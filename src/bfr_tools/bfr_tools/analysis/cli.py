@@ -2,30 +2,41 @@
 
 Subcommands::
 
-    bfr analyze energy [--json] [--out-dir DIR] [--params YAML] [--study YAML]
+    bfr analyze energy [RECORDING ...] [--corrected PATH ...] [--diagnose] [--json] ...
     bfr analyze bounce [--json] [--out-dir DIR] [--params YAML] [--study YAML] [--no-contact]
+    bfr analyze edges  [--json] [--out-dir DIR] [--quick] ...
     bfr analyze rough  --count N --seed S --out YAML [--phi-range A B] ...
 
 ``energy`` (seed chapter 2) and ``bounce`` (chapter 3, chapter 4's closest point and
 recommendation 1) evaluate a closed-loop run of the nominal controller on the nominal rigid
 plant (``bfr_control``), print our figures next to the seed's with the relative difference,
 save PNG plots like the seed's figures (``--out-dir``, default ``analysis_out``), and with
-``--json`` print one JSON document instead of the table. ``rough`` draws a seeded rough
-surface into a parameter file. Progress goes to stderr.
+``--json`` print one JSON document instead of the table. ``energy RECORDING...`` does the
+seed's recommendation 2 on real recordings instead (:mod:`.recorded`): motor work against
+the ideal energy input, their discrepancy per turn and over the run beside the chapter-2
+energies, and again with ``bfr diagnose``'s correction (``--corrected`` file or output
+folder, or ``--diagnose`` to run it). ``edges`` answers the seed's recommendation 3 with the
+two-edge contact model (:mod:`.edges`). ``rough`` draws a seeded rough surface into a
+parameter file. Progress goes to stderr.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import dataclasses
+import io
 import json
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bfr_diagnose.cli import main as diagnose_main
+from bfr_model.io import read_recording
 from bfr_model.params import ParameterError, load_params
 from bfr_model.perturbations import load_study, rough_track, with_asperities, write_params
 
@@ -37,7 +48,9 @@ from bfr_tools.analysis.bounce import (
     plot_bounce,
     taylor_error,
 )
+from bfr_tools.analysis.edges import plot_edges, two_edge_study
 from bfr_tools.analysis.energy import closed_loop_check, energy_analysis, plot_energy
+from bfr_tools.analysis.recorded import analyze_recording, plot_recorded
 from bfr_tools.analysis.trajectory import closed_loop_rigid, progress
 
 __all__ = ["main"]
@@ -72,6 +85,12 @@ def _clean(obj: Any) -> Any:
     return obj
 
 
+def _emit(args: argparse.Namespace, doc: dict, table: Any) -> int:
+    """Print ``doc`` as one JSON document (``--json``) or as ``table(doc)``; exit code 0."""
+    print(json.dumps(_clean(doc), indent=1) if args.json else table(doc))
+    return 0
+
+
 def _common(p: argparse.ArgumentParser) -> None:
     p.add_argument("--params", type=Path, help="rig parameter YAML (default: rig.yaml)")
     p.add_argument("--study", type=Path,
@@ -90,10 +109,22 @@ def build_parser() -> argparse.ArgumentParser:
         description="The seed thesis' perturbation study (Knol 2016), rebuilt: energy and "
                     "energy fluctuation of each perturbation (energy), bounces, loss of "
                     "contact and slip over bumps with the discrete and the contact model "
-                    "(bounce), seeded rough tracks (rough).")
+                    "(bounce), bumps on both plate edges (edges), seeded rough tracks "
+                    "(rough); with recordings, the motor's energy on real data (energy "
+                    "RECORDING...).")
     sub = p.add_subparsers(dest="cmd", required=True)
-    e = sub.add_parser("energy", help="seed chapter 2: energies, fluctuations, rankings")
+    e = sub.add_parser("energy", help="seed chapter 2: energies, fluctuations, rankings; with "
+                                      "recordings: recommendation 2 on real data")
     _common(e)
+    e.add_argument("recordings", nargs="*", type=Path, metavar="RECORDING",
+                   help="rig logs (.txt), CSV or ROS 2 bags: motor work against the ideal "
+                        "energy input along each (default: a simulated closed-loop run)")
+    e.add_argument("--corrected", nargs="+", type=Path, metavar="PATH",
+                   help="bfr diagnose's correction: its corrected_params.yaml or its "
+                        "--out-dir folder; one for all recordings or one per recording")
+    e.add_argument("--diagnose", action="store_true",
+                   help="run bfr diagnose on each recording for the correction (its outputs "
+                        "go to OUT_DIR/diagnose_<name>)")
     e.add_argument("--closed-loop-check", action="store_true",
                    help="also run the closed loop with each perturbation in the plant")
     b = sub.add_parser("bounce", help="seed chapter 3: paths A/B/C, threshold, slip; "
@@ -102,6 +133,11 @@ def build_parser() -> argparse.ArgumentParser:
     b.add_argument("--no-contact", action="store_true",
                    help="skip the contact-model runs (the discrete model only)")
     b.add_argument("--contact-duration", type=float, help="contact runs' length [s]")
+    g = sub.add_parser("edges", help="seed recommendation 3: bumps on both plate edges, when "
+                                     "they cancel and when they add (two-edge contact model)")
+    _common(g)
+    g.add_argument("--quick", action="store_true",
+                   help="the phase sweep only (in phase, interleaved, front only), 3 s runs")
     r = sub.add_parser("rough", help="draw a seeded rough surface into a parameter file")
     r.add_argument("--params", type=Path, help="base parameter YAML (default: rig.yaml)")
     r.add_argument("--count", type=int, required=True, help="number of asperities")
@@ -142,6 +178,10 @@ def _run(params: Any, study: Any) -> Any:
 def _energy(args: argparse.Namespace) -> int:
 
     params, study = _setup(args)
+    if args.recordings:
+        return _energy_recorded(args, params, study)
+    if args.corrected or args.diagnose:
+        raise ValueError("--corrected and --diagnose need recordings (RECORDING ...)")
     traj = _run(params, study)
     progress("energy terms (seed eqs. 2.1-2.15)")
     rep = energy_analysis(traj, params, study)
@@ -150,11 +190,7 @@ def _energy(args: argparse.Namespace) -> int:
         fig["closed_loop_check"] = closed_loop_check(params, study, traj)
     if not args.no_plots:
         fig["plots"] = [str(p) for p in plot_energy(rep, args.out_dir)]
-    if args.json:
-        print(json.dumps(_clean(fig), indent=1))
-        return 0
-    print(_energy_table(fig))
-    return 0
+    return _emit(args, fig, _energy_table)
 
 
 def _energy_table(fig: dict) -> str:
@@ -226,6 +262,112 @@ def _energy_table(fig: dict) -> str:
     return "\n".join(lines)
 
 
+def _corrected_paths(args: argparse.Namespace) -> list[Path | None]:
+    """The correction file of each recording: given, diagnosed here, or none."""
+    n = len(args.recordings)
+    if args.corrected and args.diagnose:
+        raise ValueError("give --corrected or --diagnose, not both")
+    if args.corrected:
+        if len(args.corrected) not in (1, n):
+            raise ValueError(f"--corrected: {len(args.corrected)} paths for {n} recordings "
+                             "(give one for all or one per recording)")
+        paths = list(args.corrected) * (n if len(args.corrected) == 1 else 1)
+        out: list[Path | None] = []
+        for p in paths:
+            f = p / "corrected_params.yaml" if p.is_dir() else p
+            if not f.is_file():
+                raise ValueError(f"--corrected {p}: no such file"
+                                 + (" (no corrected_params.yaml in the folder)"
+                                    if p.is_dir() else ""))
+            out.append(f)
+        return out
+    if not args.diagnose:
+        return [None] * n
+    out = []
+    for rec in args.recordings:
+        d = args.out_dir / f"diagnose_{rec.stem}"
+        progress(f"bfr diagnose {rec} --out-dir {d}")
+        with contextlib.redirect_stdout(io.StringIO()):  # its report is in d/report.md
+            code = diagnose_main([str(rec), "--out-dir", str(d), "--no-plots", "--quiet"])
+        if code != 0 or not (d / "corrected_params.yaml").is_file():
+            raise ValueError(f"bfr diagnose failed on {rec} (exit {code}); run it alone to "
+                             "see why")
+        out.append(d / "corrected_params.yaml")
+    return out
+
+
+def _energy_recorded(args: argparse.Namespace, params: Any, study: Any) -> int:
+    """``bfr analyze energy RECORDING...``: recommendation 2 on each recording."""
+    for rec in args.recordings:
+        if not rec.exists():
+            raise ValueError(f"{rec}: no such file or directory")
+    corrected = _corrected_paths(args)
+    results = []
+    for rec_path, cor_path in zip(args.recordings, corrected, strict=True):
+        progress(f"energy along {rec_path}")
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rec = read_recording(rec_path)
+        cor = load_params(cor_path) if cor_path is not None else None
+        res = analyze_recording(rec, params, study, cor, label=str(rec_path),
+                                nominal_source=str(args.params or "rig.yaml"),
+                                corrected_source=str(cor_path or ""))
+        if not args.no_plots:
+            res.figures["plots"] = [str(p) for p in
+                                    plot_recorded(res, args.out_dir, rec_path.stem)]
+        results.append(res.figures)
+    return _emit(args, {"recordings": results},
+                 lambda d: "\n\n".join(_recorded_table(f) for f in d["recordings"]))
+
+
+def _recorded_table(f: dict) -> str:
+    """The text report of one recording (``bfr analyze energy RECORDING``)."""
+    n = f["nominal"]
+    basis = n["basis"]
+    lines = [
+        f"Energy along {f['recording']} (seed recommendation 2): {f['analysed']:.1f} s of "
+        f"{f['duration']:.1f} s in {f['segments']} segment(s), {f['frame_turns']:.2f} frame "
+        f"turns, {'with' if f['has_ball'] else 'without'} the ball ({f['ball_note']})",
+        f"  {'':26s} {'over the run':>13s} {f'per {basis} (mean +- std)':>26s}",
+    ]
+
+    def row(name: str, b: dict, key: str, total: str) -> str:
+        r = b["rate"][key]
+        per = (f"{r['mean']:+.3e} +- {r['std']:.1e}" if r["std"] is not None else
+               f"{r['mean']:+.3e}" if r["mean"] is not None else "n/a")
+        return f"  {name:26s} {b[total]:+13.4e} {per:>26s}"
+
+    for b in (n, f.get("corrected")):
+        if b is None:
+            continue
+        lines.append(f" {b['label']} model ({b['params']}):")
+        lines.append(row("motor work W_m [J]", b, "motor_work", "motor_work"))
+        lines.append(row("ideal input E_in [J]", b, "energy_in", "energy_in"))
+        lines.append(row("model dissipation [J]", b, "dissipation", "model_dissipation"))
+        lines.append(row("discrepancy [J]", b, "discrepancy", "discrepancy"))
+        eq = b["equivalent"]
+        alone = [f"joint Coulomb friction of {_fmt(v)} N m" if k == "joint_coulomb_torque"
+                 else f"rolling resistance mu_rol = {_fmt(v)}" for k, v in eq.items()
+                 if v is not None]
+        lines.append(f"  mean power: motor {_fmt(b['mean_power']['motor'])} W, discrepancy "
+                     f"{_fmt(b['mean_power']['discrepancy'])} W"
+                     + (f"; alone it would take {' or '.join(alone)}" if alone else "")
+                     + (f"; share left after the correction {_fmt(b['share_left'])}"
+                        if "share_left" in b else ""))
+    pt = f["perturbations"]
+    lines += [f" Chapter-2 energies at the seed's magnitudes along the recording (loss per "
+              f"{basis} {_fmt(pt['measured_loss'])} J, peak-to-peak about its trend "
+              f"{_fmt(pt['measured_amplitude'])} J):",
+              f"  {'term':8s} {f'per {basis} [J]':>14s} {'p-p [J]':>10s}  verdict"]
+    for sym, r in pt["terms"].items():
+        s = r["seed"]
+        rate, amp = ((_fmt(s["rate"]), _fmt(s["amplitude"])) if r["applies"] else ("-", "-"))
+        lines.append(f"  {sym:8s} {rate:>14s} {amp:>10s}  {r['verdict']}")
+    if "plots" in f:
+        lines.append(" Plots: " + ", ".join(f["plots"]))
+    return "\n".join(lines)
+
+
 # -- bounce -------------------------------------------------------------------------------
 
 
@@ -256,11 +398,7 @@ def _bounce(args: argparse.Namespace) -> int:
         out["contact_wall_time"] = time.perf_counter() - t0
     if not args.no_plots:
         out["plots"] = [str(p) for p in plot_bounce(rep, traj, args.out_dir, tay, rows)]
-    if args.json:
-        print(json.dumps(_clean(out), indent=1))
-        return 0
-    print(_bounce_table(out))
-    return 0
+    return _emit(args, out, _bounce_table)
 
 
 def _bounce_table(out: dict) -> str:
@@ -353,6 +491,68 @@ def _bounce_table(out: dict) -> str:
     return "\n".join(lines)
 
 
+# -- edges --------------------------------------------------------------------------------
+
+
+def _edges(args: argparse.Namespace) -> int:
+
+    params, study = _setup(args)
+    cfg = study.two_edge
+    if args.duration:
+        cfg = dataclasses.replace(cfg, duration=args.duration)
+    if args.quick:
+        cfg = dataclasses.replace(cfg, duration=min(cfg.duration, 3.0), phases=(0.0, 0.5),
+                                  spacings=(), heights=())
+        study = dataclasses.replace(study, run=dataclasses.replace(
+            study.run, duration=min(study.run.duration, 4.0), settle=min(study.run.settle,
+                                                                         1.0)))
+    study = dataclasses.replace(study, two_edge=cfg)
+    t0 = time.perf_counter()
+    res = two_edge_study(params, study)
+    res["wall_time"] = time.perf_counter() - t0
+    if not args.no_plots:
+        res["plots"] = [str(p) for p in plot_edges(res, params, study, args.out_dir)]
+    return _emit(args, res, _edges_table)
+
+
+def _edges_table(res: dict) -> str:
+    """The text report of ``bfr analyze edges``."""
+    c = res["settings"]
+    lines = [
+        "Bumps on both plate edges (seed recommendation 3), two-edge contact model in closed "
+        f"loop, {c['duration']:g} s per run; rows of {1e3 * c['row_length']:g} mm centred at "
+        f"phi = {res['location']:.3g} rad and + pi ({res['location_from']}); bumps sigma "
+        f"{1e3 * c['width']:g} mm; phase = the back edge's row shifted by that fraction of "
+        "the spacing (front only: no back row)",
+        "",
+        f"  {'case':38s} {'slip/turn':>9s} {'turns':>5s} {'airborne':>8s} {'max|z|':>7s} "
+        f"{'lift':>6s} {'ripple':>7s} {'v_c':>5s}  rolling",
+        f"  {'':38s} {'[rad]':>9s} {'':>5s} {'':>8s} {'[mm]':>7s} {'[um]':>6s} "
+        f"{'[um]':>7s} {'[m/s]':>5s}",
+    ]
+    for r in res["runs"]:
+        k = r["kinematic"]
+        state = "yes" if r["ball_kept_rolling"] else f"lost at {r['rolling_until']:.2f} s"
+        kin = (f"{1e6 * k['mean_lift']:6.0f} {1e6 * k['ripple']:7.1f} "
+               f"{_fmt(k['critical_speed']):>5s}")
+        if "slip_per_turn" not in r:
+            lines.append(f"  {r['name']:38s} {'':>9s} {'':>5s} {'':>8s} {'':>7s} {kin}  "
+                         f"{state}")
+            continue
+        lines.append(
+            f"  {r['name']:38s} {r['excess_slip_per_turn']:+9.3f} {r['turns']:5.1f} "
+            f"{r['airborne_fraction']:8.2f} {1e3 * r['max_abs_z']:7.3f} {kin}  {state}")
+    lines += ["", "  slip/turn: int v_slip / R dt per frame turn after the start-up, less the "
+                  "baseline's; turns: how many it rests on (two row passages each)",
+              "  lift, ripple, v_c: rigid edges, quasi-static: the centre at (H_front + "
+              "H_back) / 2 over the row (module bfr_tools.analysis.edges); v_c the speed "
+              "above which the ball leaves the track over the row (flat track)",
+              f"  wall time {res['wall_time']:.0f} s"]
+    if "plots" in res:
+        lines += ["", "Plots: " + ", ".join(res["plots"])]
+    return "\n".join(lines)
+
+
 # -- rough --------------------------------------------------------------------------------
 
 
@@ -374,7 +574,8 @@ def main(argv: list[str] | None = None) -> int:
     """Entry point of ``bfr analyze``; returns the process exit code."""
     args = build_parser().parse_args(argv)
     try:
-        return {"energy": _energy, "bounce": _bounce, "rough": _rough}[args.cmd](args)
+        return {"energy": _energy, "bounce": _bounce, "edges": _edges,
+                "rough": _rough}[args.cmd](args)
     except (ParameterError, ValueError, OSError) as exc:
         print(f"bfr analyze: error: {exc}", file=sys.stderr)
         return 2

@@ -255,7 +255,7 @@ def _figures(rep: EnergyReport, traj: Trajectory, model: RigidModel, f: dict,
     e_pot_max = _peak(rep.terms["E_pot"].seed[late])
     s_avg = float(np.mean(np.abs(f["s_dot"][late])))
     dh = pm.bump_height
-    t_bump = math.sqrt(R**2 - (R - dh) ** 2) / s_avg
+    t_bump = math.sqrt(R**2 - (R - dh) ** 2) / s_avg if s_avg > 0.0 else math.inf
     de_bump = e_pot_max / t_bump
     others = max(rows[s]["seed"]["peak_fluctuation"] for s in seed_set)
     others_sum = float(np.max(np.abs(sum(np.diff(rep.terms[s].seed) / np.diff(t)

@@ -18,6 +18,9 @@ Sections (``--only`` / ``--skip``):
 ``diagnose``
     ``bfr diagnose`` wall time and peak memory on a 60 s recording, ``bfr blindtest`` wall
     time. See :mod:`bfr_tools.bench.diagnosis`.
+``view``
+    What watching costs: one ``sim_markers`` message, one ``bfr video`` frame.
+    See :mod:`bfr_tools.bench.view`.
 
 Every figure is the median over repeats with their min and max (the machine's noise), next
 to its budget and whether the median meets it; a figure that cannot be measured says why
@@ -40,7 +43,7 @@ from typing import Any
 
 from bfr_model.jit import JIT_ENABLED
 
-from bfr_tools.bench import camera, diagnosis, loop, sim
+from bfr_tools.bench import camera, diagnosis, loop, sim, view
 from bfr_tools.bench.common import (
     BenchOptions,
     Figure,
@@ -52,7 +55,7 @@ from bfr_tools.bench.common import (
 
 __all__ = ["SECTION_NAMES", "format_table", "main", "run_bench", "sections"]
 
-SECTION_NAMES = ("sim", "camera", "loop", "diagnose")
+SECTION_NAMES = ("sim", "camera", "loop", "diagnose", "view")
 
 
 def sections() -> dict[str, Section]:
@@ -66,6 +69,8 @@ def sections() -> dict[str, Section]:
                         loop.run),
         "diagnose": Section("diagnose", "bfr diagnose / blindtest wall time, memory",
                             diagnosis.SPECS, diagnosis.run),
+        "view": Section("view", "markers per message, bfr video per frame", view.SPECS,
+                        view.run),
     }
 
 

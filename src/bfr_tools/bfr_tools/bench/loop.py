@@ -5,8 +5,9 @@ without the recorder, on a private graph (a ``ROS_DOMAIN_ID`` claimed with the s
 as the tests' helpers, ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``):
 
 - ``simulator_node`` in real-time mode (``sim.mode:=realtime``; RK4 1 kHz, camera 200 Hz
-  640x480 mono8, joint_states 1 kHz, sim_truth 200 Hz), the ball started on the controller's
-  orbit (:func:`bfr_tools.rig.orbit_start`);
+  640x480 mono8, joint_states 1 kHz (``joint_states.rate:=1000``, the rig's encoder rate),
+  sim_truth 200 Hz), the ball started on the controller's orbit
+  (:func:`bfr_tools.rig.orbit_start`);
 - ``camera_node`` and ``controller_node`` with ``use_sim_time:=true``, the controller
   triggered by each ball observation (``loop.trigger:=observation``: the camera's rate).
 
@@ -34,12 +35,15 @@ Per window:
   are counted separately.
 
 CPU use of each node process over the measurement (``/proc/<pid>/stat``) is reported in
-the notes: it shows which process limits the loop.
+the notes: it shows which process limits the loop. The budgeted CPU figure is the camera
+and controller nodes' CPU time (user + system, both processes) per *simulated* second,
+``(cpu_camera + cpu_controller) / (t_sim_end - t_sim_start)`` [cores]: what the two nodes
+would take of a machine at real time, whatever the simulator's pace on this one (a shared
+machine that slows the simulator down does not make it look cheaper or dearer).
 """
 
 from __future__ import annotations
 
-import fcntl
 import itertools
 import math
 import os
@@ -51,10 +55,11 @@ import tempfile
 import time
 from collections.abc import Callable
 from pathlib import Path
-from typing import IO, Any
+from typing import Any
 
 import numpy as np
 import rclpy
+from bfr_ros.domain import claim_domain_id
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import (
     DurabilityPolicy,
@@ -76,7 +81,7 @@ from bfr_tools.bench.common import (
 from bfr_tools.rig import NODES, NodeSpec, orbit_start
 from bfr_tools.run import executable_path
 
-__all__ = ["SPECS", "claim_domain_id", "run"]
+__all__ = ["SPECS", "run"]
 
 _NS = 1_000_000_000
 _FRAME_NS = 5_000_000  # 200 Hz
@@ -92,35 +97,15 @@ SPECS: list[FigureSpec] = [
     FigureSpec("loop.control_rate_hz", "sustained control rate (effort commands)", "Hz"),
     FigureSpec("loop.frame_rate_hz", "simulator frames published (real-time mode)", "Hz"),
     FigureSpec("loop.rolling_pct", "control steps with the ball under control (ROLLING)", "%"),
+    FigureSpec("loop.cpu_camera_controller",
+               "camera + controller CPU per simulated second (200 Hz camera, 1 kHz encoder)",
+               "cores", Budget("<", 0.5, source="issue 17")),
+    FigureSpec("loop.cpu_camera", "camera node CPU per simulated second", "cores"),
+    FigureSpec("loop.cpu_controller", "controller node CPU per simulated second", "cores"),
+    FigureSpec("loop.cpu_simulator", "simulator node CPU per simulated second", "cores"),
+    FigureSpec("loop.real_time_factor", "simulated / wall time over the measurement", "x"),
 ]
 _BY_KEY = {s.key: s for s in SPECS}
-
-_LOCK: IO[str] | None = None
-_DOMAIN: int | None = None
-
-
-def claim_domain_id() -> int:
-    """Claim a ROS domain id no other process on this machine holds (tests' lock files).
-
-    The claim is an exclusive ``flock`` on ``<tmp>/bfr-ros-domain-<id>.lock`` (the scheme of
-    ``tests/rosutil.py``) held for the rest of the process's life.
-    """
-    global _LOCK, _DOMAIN
-    if _DOMAIN is not None:
-        return _DOMAIN
-    ids = range(1, 102)
-    start = (os.getpid() * 7) % len(ids)
-    for k in range(len(ids)):
-        domain = ids[(start + k) % len(ids)]
-        handle = (Path(tempfile.gettempdir()) / f"bfr-ros-domain-{domain}.lock").open("a")
-        try:
-            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except OSError:
-            handle.close()
-            continue
-        _LOCK, _DOMAIN = handle, domain
-        return domain
-    raise RuntimeError("no free ROS_DOMAIN_ID in 1..101 on this machine")
 
 
 def _cpu_seconds(pid: int) -> float:
@@ -218,6 +203,7 @@ def _window_figures(d: dict[str, list[tuple]], w0: int, w1: int) -> dict[str, An
     """
     span = (w1 - w0) / _NS
     frames = {st: src for src, _, st in d["truth"] if w0 <= src < w1}
+    sim_span = (max(frames) - min(frames)) / _NS if len(frames) > 1 else math.nan
     obs_stamps = {o[2] for o in d["obs"]}
     dropped = sum(1 for st in frames if st not in obs_stamps)
     n_obs = sum(1 for o in d["obs"] if w0 <= o[1] < w1)
@@ -255,6 +241,8 @@ def _window_figures(d: dict[str, list[tuple]], w0: int, w1: int) -> dict[str, An
         "rolling_pct": 100.0 * float(np.mean(np.array(modes) == 1)) if modes else 0.0,
         "latency_count": float(lat.size),
         "frames": float(len(frames)),
+        "sim_span": sim_span,
+        "real_time_factor": sim_span / span if span > 0 else math.nan,
         "_lat": lat,
     }
 
@@ -279,7 +267,7 @@ def run(opts: BenchOptions, say: Progress) -> list[Figure]:
     log_dir.mkdir(parents=True, exist_ok=True)
     start = orbit_start(0.3, 0.05)
     sim_args = ["-p", "sim.mode:=realtime", "-p", "start.wait_subscribers:=2",
-                "-p", "truth.publish:=true"]
+                "-p", "truth.publish:=true", "-p", "joint_states.rate:=1000.0"]
     sim_args += [a for k, v in start.items() for a in ("-p", f"{k}:={v!r}")]
     spec_cls = NodeSpec
     if opts.profile:
@@ -341,13 +329,18 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
         return [not_measured(s, why) for s in SPECS]
     rec.spin_for(1.0 if opts.quick else 2.0)  # settle
     pids = {n: s.process.pid for n, s in nodes.items()}
+    cpu_marks: list[tuple[int, dict[str, float]]] = []  # (wall ns, cpu seconds per node)
     cpu0 = {n: _cpu_seconds(p) for n, p in pids.items()}
     bench_cpu0 = time.process_time()
     load0 = os.getloadavg()[0]
     say(f"loop: measuring {opts.loop_duration:g} s in {opts.loop_windows} window(s)")
     rec.recording = True
     w0 = time.time_ns()
-    rec.spin_for(opts.loop_duration)
+    cpu_marks.append((w0, cpu0))
+    edges_wall = np.linspace(0.0, opts.loop_duration, opts.loop_windows + 1)[1:]
+    for e in edges_wall:  # CPU marks at the window edges
+        rec.spin_for(max(0.0, w0 / _NS + e - time.time_ns() / _NS))
+        cpu_marks.append((time.time_ns(), {n: _cpu_seconds(p) for n, p in pids.items()}))
     w1 = time.time_ns()
     cpu1 = {n: _cpu_seconds(p) for n, p in pids.items()}
     bench_cpu = time.process_time() - bench_cpu0
@@ -365,8 +358,12 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
     history = ", ".join(f"{m} at t = {t} s" if t else m for m, t in events[:6]) or "none"
     d = dict(rec.data)
     d["cmd"] = sorted(rec.data["cmd"], key=lambda c: c[0])
-    edges = np.linspace(w0, w1, opts.loop_windows + 1).round().astype(np.int64)
+    edges = [m[0] for m in cpu_marks]
     wins = [_window_figures(d, int(a), int(b)) for a, b in itertools.pairwise(edges)]
+    for w, (c0, c1) in zip(wins, itertools.pairwise([m[1] for m in cpu_marks]), strict=True):
+        for n in ("camera", "controller", "simulator"):
+            w[f"cpu_{n}"] = (c1[n] - c0[n]) / w["sim_span"]
+        w["cpu_camera_controller"] = w["cpu_camera"] + w["cpu_controller"]
     allw = _window_figures(d, int(w0), int(w1))
     span = (w1 - w0) / _NS
     cpu = {n: 100.0 * (cpu1[n] - cpu0[n]) / span for n in pids}
@@ -403,6 +400,11 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
         "rolling_pct": ("share of control steps in mode ROLLING; 100 % = the ball was under "
                         "control all along (the other figures hold either way); controller "
                         f"mode changes since the start (simulated time): {history}"),
+        "cpu_camera_controller": (
+            "user + system CPU seconds of the camera and controller processes (/proc) per "
+            "simulated second of the window (sim_truth stamps); joint_states 1 kHz, camera "
+            f"200 Hz 640x480 mono8; load {load0:.2f} at start"),
+        "real_time_factor": "simulated seconds (sim_truth stamps) per wall-clock second",
     }
     figs = []
     for spec in SPECS:

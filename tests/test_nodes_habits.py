@@ -1,0 +1,150 @@
+"""ROS habits of the nodes (issue 17, item 7) and the cheap input paths they rely on.
+
+Start-up-only parameters are read-only (a parameter-set request fails with the reason),
+unknown parameters and unreadable parameter files stop a node at start with one FATAL line
+(exit status 2, no traceback), log lines name resolved topics, the environment is
+localhost-only unless told otherwise; the CDR parsers of joint_states and images agree with
+rclpy's deserialisation field by field.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import subprocess
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rosutil
+from bfr_ros.node_common import CdrError, RawImage, image_to_array, parse_joint_state
+from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import Image, JointState
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def wait_exit(proc: rosutil.NodeProcess, timeout: float = 60.0) -> int:
+    deadline = time.monotonic() + timeout
+    while proc.alive and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not proc.alive, proc.output()[-2000:]
+    return proc.process.returncode
+
+
+# -- start-up refusals ------------------------------------------------------------------------
+@pytest.mark.parametrize(("package", "exe", "args", "message"), [
+    ("bfr_control", "controller_node", ["-p", "loop.trigerr:=joint_states"],
+     "unknown parameter for node /controller: loop.trigerr (did you mean loop.trigger?)"),
+    ("bfr_camera", "camera_node", ["-p", "detector.n_ray:=32"],
+     "unknown parameter for node /camera: detector.n_ray (did you mean detector.n_rays"),
+    ("bfr_control", "controller_node", ["-p", "actuator.torque_limit:=1e9"],
+     "actuator.torque_limit"),
+])
+def test_bad_parameters_stop_the_node_with_one_line(node_processes, package: str, exe: str,  # noqa: ANN001
+                                                    args: list[str], message: str) -> None:
+    proc = node_processes.start(package, exe, ros_args=args)
+    assert wait_exit(proc) == 2
+    out = proc.output()
+    assert message in out, out
+    assert "Traceback" not in out
+    fatal = [line for line in out.splitlines() if "[FATAL]" in line]
+    assert len(fatal) == 1
+
+
+def test_unreadable_parameter_file_is_one_fatal_line(node_processes, tmp_path: Path) -> None:  # noqa: ANN001
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("/**:\n  ros__parameters:\n    camera:\n      k: [706.4, 0, 327.3]\n")
+    proc = node_processes.start("bfr_camera", "camera_node", ros_args=["--params-file",
+                                                                        str(bad)])
+    assert wait_exit(proc) == 2
+    out = proc.output()
+    assert "Traceback" not in out and "RCLError" not in out
+    fatal = [line for line in out.splitlines() if "[FATAL]" in line]
+    assert len(fatal) == 1 and str(bad) in fatal[0]
+    assert "Sequence should be of same type" in fatal[0]
+
+
+def test_startup_parameters_are_read_only(ros_harness: rosutil.RosHarness,
+                                          node_processes) -> None:  # noqa: ANN001
+    h = ros_harness
+    ctl = node_processes.start("bfr_control", "controller_node")
+    client = h.node.create_client(SetParameters, "/controller/set_parameters")
+    assert client.wait_for_service(timeout_sec=60.0), ctl.output()[-2000:]
+    req = SetParameters.Request()
+    req.parameters = [Parameter(name="actuator.torque_limit", value=ParameterValue(
+        type=ParameterType.PARAMETER_DOUBLE, double_value=0.05))]
+    fut = client.call_async(req)
+    assert h.spin_until(fut.done, timeout=30.0)
+    result = fut.result().results[0]
+    assert not result.successful
+    assert "read-only" in result.reason and "actuator.torque_limit" in result.reason
+    assert ctl.alive
+
+
+def test_log_lines_name_the_resolved_topics(ros_harness: rosutil.RosHarness,
+                                            node_processes) -> None:  # noqa: ANN001
+    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
+        "-r", "joint_states:=/rig/encoder", "-r", "effort_controller/commands:=/rig/effort"])
+    assert ros_harness.spin_until(lambda: "mode WAITING" in ctl.output(), timeout=60)
+    assert "/rig/encoder + /ball_observation -> /rig/effort" in ctl.output()
+
+
+def test_env_is_localhost_only_unless_told() -> None:
+    script = REPO / "scripts" / "env.sh"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("ROS_AUTOMATIC")}
+    out = subprocess.run(["bash", "-c", f". {script} && echo $ROS_AUTOMATIC_DISCOVERY_RANGE"],
+                         env=env, capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "LOCALHOST"
+    env["ROS_AUTOMATIC_DISCOVERY_RANGE"] = "SUBNET"
+    out = subprocess.run(["bash", "-c", f". {script} && echo $ROS_AUTOMATIC_DISCOVERY_RANGE"],
+                         env=env, capture_output=True, text=True, check=True).stdout.strip()
+    assert out == "SUBNET"
+
+
+# -- CDR parsing against rclpy -------------------------------------------------------------------
+def test_joint_state_parser_agrees_with_rclpy() -> None:
+    rng = random.Random(0)
+    for _ in range(300):
+        js = JointState()
+        js.header.stamp.sec = rng.randrange(0, 2 ** 31)
+        js.header.stamp.nanosec = rng.randrange(0, 10 ** 9)
+        js.header.frame_id = "f" * rng.randrange(0, 9)
+        js.name = ["j" * rng.randrange(1, 13) for _ in range(rng.randrange(0, 4))]
+        js.position = [rng.uniform(-9, 9) for _ in range(rng.randrange(0, 4))]
+        js.velocity = [rng.uniform(-9, 9) for _ in range(rng.randrange(0, 4))]
+        js.effort = [rng.uniform(-9, 9) for _ in range(rng.randrange(0, 4))]
+        t, names, pos, vel, eff = parse_joint_state(serialize_message(js))
+        assert t == js.header.stamp.sec * 10 ** 9 + js.header.stamp.nanosec
+        assert names == list(js.name)
+        assert list(pos) == list(js.position) and list(vel) == list(js.velocity)
+        assert list(eff) == list(js.effort)
+    js.effort = [1.0, 2.0]
+    raw = serialize_message(js)
+    for cut in (3, 10, len(raw) - 8):
+        with pytest.raises(CdrError):
+            parse_joint_state(raw[:cut])
+
+
+def test_image_parser_agrees_with_rclpy() -> None:
+    rng = np.random.default_rng(1)
+    for enc, dtype, ch in (("mono8", np.uint8, 1), ("mono16", np.uint16, 1),
+                           ("bgr8", np.uint8, 3)):
+        arr = rng.integers(0, 200, (7, 5, ch) if ch > 1 else (7, 5)).astype(dtype)
+        img = Image()
+        img.header.stamp.sec, img.header.stamp.nanosec = 12, 345
+        img.header.frame_id = "camera_optical_frame"
+        img.height, img.width = 7, 5
+        img.encoding = enc
+        img.step = arr.strides[0]
+        img.data = arr.tobytes()
+        raw = RawImage(serialize_message(img))
+        assert (raw.stamp_ns, raw.frame_id, raw.encoding) == (12 * 10 ** 9 + 345,
+                                                              "camera_optical_frame", enc)
+        got, err = image_to_array(raw)
+        assert err == "" and np.array_equal(got, arr)
+    with pytest.raises(CdrError, match="truncated"):
+        RawImage(serialize_message(img)[:-4])
