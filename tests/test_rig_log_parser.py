@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -131,22 +132,54 @@ def test_no_ball_and_stale_fix_are_invalid() -> None:
     ("", "file is empty"),
     ("   \n\r\n", "file is empty"),
     ("\n".join(NOISE) + "\n", r"no data lines .* skipped info: 2, terminal: 3"),
-    ("\n".join([*body(3), "[inf] t=4.1,torque=0.01,theta=1,dtheta=0,dphi=0,x=0,y=0",
-                *body(3, 4.2)]), r"mem:4: malformed data line: missing key\(s\) 'phi'"),
-    ("\n".join([*body(3), line(4.1, theta=float("nan")), *body(3, 4.2)]),
-     r"mem:4: non-finite value theta='nan'"),
-    ("\n".join([*body(3), line(4.1, x=float("inf")), *body(3, 4.2)]),
-     r"mem:4: non-finite value x='inf'"),
-    ("\n".join([*body(3), line(4.1).replace("theta=1", "theta=1.0.2"), *body(3, 4.2)]),
-     r"mem:4: value of 'theta' is not a number: '1.0.2'"),
-    ("\n".join([*body(5), *body(5, 3.0)]),
-     r"mem:6: time goes backwards from t=4.004 \(line 5\) to t=3.0 without a restart"),
-    ("\n".join([*body(3), line(4.1).replace("dphi=", "dpsi="), *body(3, 4.2)]),
-     r"mem:4: malformed data line: missing key\(s\) 'dphi'"),
 ])
 def test_malformed_input_errors(text: str, message: str) -> None:
     with pytest.raises(RigLogError, match=message):
         parse_rig_log_text(text, "mem")
+
+
+@pytest.mark.parametrize(("text", "cause", "count", "warning"), [
+    ("\n".join([*body(3), "[inf] t=4.1,torque=0.01,theta=1,dtheta=0,dphi=0,x=0,y=0",
+                *body(3, 4.2)]), "corrupt", 1, r"mem:4: malformed data line skipped: missing "
+                                                r"key\(s\) 'phi'"),
+    ("\n".join([*body(3), line(4.1, theta=float("nan")), *body(3, 4.2)]), "non_finite", 1,
+     None),
+    ("\n".join([*body(3), line(4.1, x=float("inf")), *body(3, 4.2)]), "non_finite", 1, None),
+    ("\n".join([*body(3), line(4.1).replace("theta=1", "theta=1.0.2"), *body(3, 4.2)]),
+     "corrupt", 1, r"mem:4: value of 'theta' is not a number: '1.0.2'"),
+    ("\n".join([*body(5), *body(5, 3.0)]), "out_of_order", 5, None),
+    ("\n".join([*body(3), line(4.1).replace("dphi=", "dpsi="), *body(3, 4.2)]), "corrupt", 1,
+     r"mem:4: malformed data line skipped: missing key\(s\) 'dphi'"),
+    ("\n".join([*body(3), line(4.1, theta=1e9), *body(3, 4.2)]), "out_of_range", 1, None),
+])
+def test_bad_lines_are_accounted(text: str, cause: str, count: int,
+                                 warning: str | None) -> None:
+    """A bad data line is left out, counted by cause and named; the rest is read."""
+    log = parse_rig_log_text(text, "mem")
+    acc = log.runs[0].account
+    assert dict(acc.dropped) == {cause: count}
+    assert acc.samples_present == acc.samples_used + count == log.recording().n + count
+    line_no = 4 if cause != "out_of_order" else 6
+    assert any(a.startswith(cause) and f"line {line_no}" in a for a in acc.actions)
+    if warning is not None:
+        assert any(re.search(warning, w) for w in log.warnings)
+
+
+def test_ball_off_the_frame_is_excluded_not_dropped() -> None:
+    rows = body(20)
+    rows[7] = line(4.007, theta=1.014, x=1e300, y=0.08)
+    rec = parse_rig_log_text("\n".join(rows) + "\n", "mem").recording()
+    acc = rec.meta["read_account"]
+    assert acc["samples_used"] == 20 and acc["degraded"] == {"ball_off_frame": 1}
+    assert not rec.ball_valid[7] and rec.ball_valid[8:].all()
+
+
+def test_events_after_a_restart_marker_belong_to_the_next_run() -> None:
+    text = "\n".join([*body(10), "[inf] initializing hardware..", "[inf] ball was lost",
+                      *body(10, 1.0)]) + "\n"
+    log = parse_rig_log_text(text, "mem")
+    assert len(log.runs) == 2
+    assert log.runs[0].events == [] and log.runs[1].events == [(0, "ball was lost")]
 
 
 def test_missing_file(tmp_path: Path) -> None:

@@ -50,14 +50,17 @@ import math
 import re
 import time
 import warnings
+from array import array
 from collections import Counter
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
 
+from bfr_model.io.account import Gates, ReadAccount, gate_samples
 from bfr_model.io.timing import camera_backlog_end, line_rate, velocity_lag
 from bfr_model.recording import Recording
 
@@ -107,7 +110,8 @@ class RigRun:
     Attributes
     ----------
     data : ndarray, shape (n, 8)
-        Values in the order of :data:`KEYS`, as logged (rig conventions and units).
+        Values in the order of :data:`KEYS`, as logged (rig conventions and units), of the
+        samples the physical gates kept (:func:`bfr_model.io.account.gate_samples`).
     lines : ndarray of int, shape (n,)
         1-based line number of each sample in the file.
     events : list of (int, str)
@@ -115,12 +119,18 @@ class RigRun:
         lost``); the index is that of the first sample after the message.
     dropped_duplicates : int
         Samples dropped because their timestamp repeated the previous one.
+    ball_off : ndarray of bool, shape (n,), optional
+        Samples whose held ball position is off the frame (excluded from the ball fields).
+    account : ReadAccount, optional
+        What the run's lines held and what was used (:mod:`bfr_model.io.account`).
     """
 
     data: NDArray[np.float64]
     lines: NDArray[np.int64]
     events: list[tuple[int, str]] = field(default_factory=list)
     dropped_duplicates: int = 0
+    ball_off: NDArray[np.bool_] | None = None
+    account: ReadAccount | None = None
 
     def column(self, key: str) -> NDArray[np.float64]:
         """One raw column by key (see :data:`KEYS`)."""
@@ -142,12 +152,13 @@ class RigLog:
     n_lines : int
         Lines in the file.
     n_data : int
-        Data lines parsed (including duplicates later dropped).
+        Complete data lines (including samples the gates later dropped).
     skipped : dict of str to int
         Skipped lines per reason: ``empty``, ``terminal`` (prompts, escape codes, build
         output), ``info`` (other ``[inf]`` messages), ``obs`` (``[obs]`` lines),
         ``partial`` (a data line cut short by another line), ``truncated_final`` (the last
-        line cut off), ``duplicate_time`` (samples dropped for a repeated timestamp).
+        line cut off), ``malformed`` (keys missing, unknown or out of order, or a value that
+        is not a number), ``duplicate_time`` (samples dropped for a repeated timestamp).
     warnings : list of str
         Recoverable problems with their line numbers.
     runs : list of RigRun
@@ -174,6 +185,8 @@ class RigLog:
     def recording(self, run: int | None = None, **options: Any) -> Recording:
         """The selected run as a :class:`Recording` in our conventions.
 
+        ``meta["read_account"]`` is the run's :class:`~bfr_model.io.account.ReadAccount`.
+
         Parameters
         ----------
         run : int, optional
@@ -196,13 +209,6 @@ class RigLog:
             rec.meta["notes"].append(
                 f"the log holds {len(self.runs)} runs (clock restarts); run {k} selected")
         return rec
-
-
-def _float_or_error(text: str, key: str, where: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise RigLogError(f"{where}: value of {key!r} is not a number: {text!r}") from None
 
 
 def _classify_malformed(line: str) -> tuple[str, str]:
@@ -241,21 +247,33 @@ def _clean_terminal_line(line: str) -> str:
 
 @dataclass(kw_only=True)
 class _RunRows:
-    """The data rows of one run as scanned (mutable; still text, not yet checked).
+    """The data rows of one run as scanned (mutable), values already as floats.
+
+    The values are appended to flat ``array('d')`` buffers (8 per row, 8 bytes each), so a
+    run costs its numbers and nothing per line (the log is read line by line).
 
     Attributes
     ----------
-    rows : list of tuple of str
-        The values of each data line, in the order of :data:`KEYS`.
-    lines : list of int
+    values : array of float
+        The values of each data line, in the order of :data:`KEYS`, row after row.
+    lines : array of int
         1-based line number of each row.
     events : list of (int, str)
         ``(row index, message)`` of ``[inf]`` messages, as in :attr:`RigRun.events`.
+    lost : dict of str to list of int
+        Line numbers of the lines of this run lost before the gates, per account cause
+        (``corrupt``: malformed or not a number or cut by another line; ``truncated``: the
+        last line cut off).
     """
 
-    rows: list[tuple[str, ...]] = field(default_factory=list)
-    lines: list[int] = field(default_factory=list)
+    values: array = field(default_factory=lambda: array("d"))
+    lines: array = field(default_factory=lambda: array("q"))
     events: list[tuple[int, str]] = field(default_factory=list)
+    lost: dict[str, list[int]] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        """Number of rows."""
+        return len(self.lines)
 
 
 @dataclass(kw_only=True)
@@ -266,59 +284,131 @@ class _LogScan:
     ----------
     source : str
         Name used in messages.
-    last_nonempty : int
-        0-based index of the last non-blank line (-1: none); a partial data line there is
-        a truncated final line.
-    ends_with_newline : bool
-        Whether the text ends with a newline (said in the truncated-line warning).
-    runs : list of _RunRows
-        Runs in file order; the last one is being filled.
+    duplicates : str
+        Policy for repeated time stamps (see :func:`parse_rig_log_text`).
+    gates : Gates or None
+        Bounds of the physical gates (None: rig.yaml's).
+    current : _RunRows
+        The run being filled.
+    runs : list of RigRun
+        Finished runs in file order (each finished as soon as the next one starts).
     skipped : Counter
         Skipped lines per reason (see :attr:`RigLog.skipped`).
     warnings : list of str
         Recoverable problems with their line numbers.
     new_run_pending : bool
         A restart marker was seen: the next data line starts a new run.
+    pending_events : list of str
+        Messages after a restart marker, before the next run's first line (they belong to
+        that run, at its first sample).
+    pending_partial : tuple or None
+        ``(line number, detail, run rows)`` of a cut-off data line at the end of its line:
+        a ``truncated_final`` line if no non-blank line follows, else ``partial``.
+    n_lines, n_data : int
+        Lines and complete data lines so far.
+    last_nonblank : int
+        Line number of the latest non-blank line.
+    dropped_runs : list of RigRun
+        Runs of which the gates kept no sample (accounted, not returned).
     """
 
     source: str
-    last_nonempty: int
-    ends_with_newline: bool
-    runs: list[_RunRows] = field(default_factory=lambda: [_RunRows()])
+    duplicates: str = "drop"
+    gates: Gates | None = None
+    current: _RunRows = field(default_factory=_RunRows)
+    runs: list[RigRun] = field(default_factory=list)
     skipped: Counter[str] = field(default_factory=Counter)
     warnings: list[str] = field(default_factory=list)
     new_run_pending: bool = False
+    pending_events: list[str] = field(default_factory=list)
+    pending_partial: tuple[int, str, _RunRows] | None = None
+    n_lines: int = 0
+    n_data: int = 0
+    last_nonblank: int = 0
+    dropped_runs: list[RigRun] = field(default_factory=list)
 
     def add_data(self, groups: tuple[str, ...], lineno: int) -> None:
-        """Append a data row, first starting a new run after a restart marker."""
-        if self.new_run_pending and self.runs[-1].rows:
-            self.runs.append(_RunRows())
+        """Append a data row, first starting a new run after a restart marker.
+
+        A value that is not a number makes the line ``corrupt`` (counted, warned).
+        """
+        if self.new_run_pending and len(self.current):
+            self.finish_current()
         self.new_run_pending = False
-        self.runs[-1].rows.append(groups)
-        self.runs[-1].lines.append(lineno)
+        if self.pending_events:
+            self.current.events += [(len(self.current), m) for m in self.pending_events]
+            self.pending_events = []
+        try:
+            row = [float(g) for g in groups]
+        except ValueError:
+            bad = next(k for k, g in zip(KEYS, groups, strict=True) if not _is_float(g))
+            msg = (f"{self.source}:{lineno}: value of {bad!r} is not a number: "
+                   f"{groups[KEYS.index(bad)]!r}")
+            self.lose("corrupt", "malformed", lineno, msg)
+            return
+        self.n_data += 1
+        self.current.values.extend(row)
+        self.current.lines.append(lineno)
+
+    def lose(self, cause: str, reason: str, lineno: int, warning: str,
+             rows: _RunRows | None = None) -> None:
+        """Count a data line lost before the gates (``cause`` of the account)."""
+        self.skipped[reason] += 1
+        self.warnings.append(warning)
+        (rows or self.current).lost.setdefault(cause, []).append(lineno)
 
     def add_info(self, msg: str) -> None:
         """Count an ``[inf]`` message: a restart marker, or an event of the current run."""
         self.skipped["info"] += 1
-        if msg.startswith("initializing hardware"):
+        if msg.startswith(("initializing hardware", "stopped")):
             self.new_run_pending = True
-        elif msg.startswith("stopped"):
-            self.new_run_pending = True
+        elif self.new_run_pending:
+            self.pending_events.append(msg)
         else:
-            self.runs[-1].events.append((len(self.runs[-1].rows), msg))
+            self.current.events.append((len(self.current), msg))
+
+    def resolve_partial(self, final: bool) -> None:
+        """Settle a pending cut-off line: ``truncated_final`` at the end, else ``partial``."""
+        if self.pending_partial is None:
+            return
+        lineno, detail, rows = self.pending_partial
+        self.pending_partial = None
+        if final:
+            self.lose("truncated", "truncated_final", lineno,
+                      f"{self.source}:{lineno}: truncated final line skipped ({detail})", rows)
+        else:
+            self.lose("corrupt", "partial", lineno,
+                      f"{self.source}:{lineno}: partial data line skipped ({detail})", rows)
+
+    def finish_current(self) -> None:
+        """Convert, gate and account the run being filled; start a new one."""
+        rows = self.current
+        self.current = _RunRows()
+        if len(rows) or rows.lost:
+            run = _finish_run(rows, self.source, self.duplicates, self.gates)
+            if len(run):
+                self.runs.append(run)
+            else:
+                self.warnings.append(f"{self.source}: a run of {run.account.samples_present} "
+                                     f"line(s) kept no sample: {run.account.line()}")
+                self.dropped_runs.append(run)
+            self.skipped["duplicate_time"] += run.dropped_duplicates
 
 
-def _scan_data_segments(scan: _LogScan, text: str, lineno: int, *,
-                        last_line: bool) -> None:
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _scan_data_segments(scan: _LogScan, text: str, lineno: int) -> None:
     """Parse ``text``, one or more data lines run together (``[inf] t=...[inf] t=...``).
 
-    Complete segments are added as data. A cut-off segment is skipped with a warning
-    (``truncated_final`` when it ends the last non-blank line, else ``partial``).
-
-    Raises
-    ------
-    RigLogError
-        A segment with missing, unknown or out-of-order keys.
+    Complete segments are added as data. A cut-off segment ending the line may be the
+    file's truncated last line (settled by the next non-blank line); other cut-off or
+    malformed segments are ``corrupt`` lines, counted and warned.
     """
     segments = [s for s in text.split("[inf] ")[1:] if s]
     for j, seg in enumerate(segments):
@@ -327,32 +417,32 @@ def _scan_data_segments(scan: _LogScan, text: str, lineno: int, *,
         if m is not None:
             scan.add_data(m.groups(), lineno)
             continue
-        is_last = last_line and j == len(segments) - 1
         kind, detail = _classify_malformed(seg_line)
-        if kind == "partial" and is_last:
-            scan.skipped["truncated_final"] += 1
-            eof = "" if scan.ends_with_newline else ", no newline at end of file"
-            scan.warnings.append(f"{scan.source}:{lineno}: truncated final line skipped "
-                                 f"({detail}{eof})")
+        if kind == "partial" and j == len(segments) - 1:
+            scan.pending_partial = (lineno, detail, scan.current)
         elif kind == "partial":
-            scan.skipped["partial"] += 1
-            scan.warnings.append(f"{scan.source}:{lineno}: partial data line skipped "
-                                 f"({detail})")
+            scan.lose("corrupt", "partial", lineno,
+                      f"{scan.source}:{lineno}: partial data line skipped ({detail})")
         else:
-            raise RigLogError(f"{scan.source}:{lineno}: malformed data line: {detail}: "
-                              f"{seg_line[:120]!r}")
+            scan.lose("corrupt", "malformed", lineno,
+                      f"{scan.source}:{lineno}: malformed data line skipped: {detail}: "
+                      f"{seg_line[:120]!r}")
 
 
-def _scan_line(scan: _LogScan, raw: str, i: int) -> None:
-    """Sort line ``i`` (0-based) into a data row, a run marker or event, or counted noise."""
-    lineno = i + 1
+def _scan_line(scan: _LogScan, raw: str, lineno: int) -> None:
+    """Sort line ``lineno`` (1-based) into a data row, a run marker or event, or noise."""
     line = raw[:-1] if raw.endswith("\r") else raw
     m = _DATA_RE.fullmatch(line)
     if m is not None:
+        scan.resolve_partial(final=False)
+        scan.last_nonblank = lineno
         scan.add_data(m.groups(), lineno)
         return
     # Slow path: noise, or a data line wrapped in escape codes / carriage returns.
     clean = _clean_terminal_line(line)
+    if clean:
+        scan.resolve_partial(final=False)
+        scan.last_nonblank = lineno
     m = _DATA_RE.fullmatch(clean)
     if m is not None:
         scan.add_data(m.groups(), lineno)
@@ -361,87 +451,89 @@ def _scan_line(scan: _LogScan, raw: str, i: int) -> None:
     elif clean.startswith("[obs]"):
         scan.skipped["obs"] += 1
     elif (pos := clean.find("[inf] t=")) >= 0:
-        _scan_data_segments(scan, clean[pos:], lineno, last_line=i == scan.last_nonempty)
+        _scan_data_segments(scan, clean[pos:], lineno)
     elif clean.startswith("[inf]"):
         scan.add_info(clean[len("[inf]"):].strip())
     else:
         scan.skipped["terminal"] += 1
 
 
-def _rows_to_array(rows: list[tuple[str, ...]], lines: list[int],
-                   source: str) -> NDArray[np.float64]:
-    """The rows as floats, shape (n, 8).
+def _finish_run(raw: _RunRows, source: str, duplicates: str,
+                gates: Gates | None = None) -> RigRun:
+    """Gate and account the rows of one run (:func:`bfr_model.io.account.gate_samples`).
 
     Raises
     ------
     RigLogError
-        A non-numeric value, naming its line and key.
+        With ``duplicates="error"``, a repeated timestamp.
     """
-    try:
-        return np.array(rows, dtype=np.float64)
-    except ValueError:
-        for row, ln in zip(rows, lines, strict=True):
-            for key, val in zip(KEYS, row, strict=True):
-                _float_or_error(val, key, f"{source}:{ln}")
-        raise  # pragma: no cover - the loop above raises
+    lines = np.frombuffer(raw.lines, dtype=np.int64) if len(raw) else np.zeros(0, np.int64)
+    data = (np.frombuffer(raw.values, dtype=np.float64).reshape(-1, len(KEYS)) if len(raw)
+            else np.zeros((0, len(KEYS))))
+    col = {k: data[:, j] for j, k in enumerate(KEYS)}
+    no_ball = (col["x"] == 0.0) & (col["y"] == 0.0)
+    g = gate_samples(col["t"], col["theta"], col["dtheta"], col["torque"],
+                     np.where(no_ball, np.nan, col["x"]), np.where(no_ball, np.nan, col["y"]),
+                     others=(col["phi"], col["dphi"], col["x"], col["y"]), gates=gates)
+    if g.dropped.get("duplicate") and duplicates == "error":
+        k = g.first["duplicate"]
+        raise RigLogError(f"{source}:{lines[k]}: duplicate timestamp t={float(col['t'][k])!r} "
+                          f"(same as line {lines[k - 1]}); {g.dropped['duplicate']} "
+                          f"duplicate(s) in this run")
+    keep = g.keep
+    events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in raw.events]
+    dropped = dict(g.dropped)
+    for cause, where in raw.lost.items():
+        dropped[cause] = dropped.get(cause, 0) + len(where)
+    actions = g.actions(lambda i: f"line {lines[i]}")
+    actions += [f"{cause}: {len(where)} line(s) skipped, first at line {where[0]}"
+                for cause, where in raw.lost.items()]
+    t_all = col["t"][np.isfinite(col["t"])]
+    kept_t = col["t"][keep]
+    account = ReadAccount(
+        source=source, kind="rig_log", samples_present=len(raw) + sum(
+            len(w) for w in raw.lost.values()), samples_used=int(keep.sum()),
+        seconds_present=float(t_all.max() - t_all.min()) if t_all.size else 0.0,
+        seconds_used=float(kept_t[-1] - kept_t[0]) if kept_t.size else 0.0,
+        dropped=dropped, degraded={"ball_off_frame": int(g.ball_off.sum())}, actions=actions)
+    return RigRun(data=data[keep], lines=lines[keep], events=events,
+                  dropped_duplicates=int(g.dropped.get("duplicate", 0)),
+                  ball_off=g.ball_off[keep], account=account)
 
 
-def _check_run_values(data: NDArray[np.float64], rows: list[tuple[str, ...]],
-                      lines: NDArray[np.int64], source: str) -> None:
-    """Check that all values are finite and time never goes backwards.
-
-    Raises
-    ------
-    RigLogError
-        The first non-finite value, or the first backwards step in ``t``, with its line.
-    """
-    bad = ~np.isfinite(data)
-    if bad.any():
-        r, c = np.argwhere(bad)[0]
-        raise RigLogError(f"{source}:{lines[r]}: non-finite value {KEYS[c]}="
-                          f"{rows[r][c]!r} ({int(bad.sum())} non-finite value(s) in "
-                          f"this run)")
-    t = data[:, 0]
-    back = np.nonzero(np.diff(t) < 0)[0]
-    if back.size:
-        k = int(back[0])
-        raise RigLogError(
-            f"{source}:{lines[k + 1]}: time goes backwards from t={float(t[k])!r} (line "
-            f"{lines[k]}) to t={float(t[k + 1])!r} without a restart marker "
-            f"('[inf] initializing hardware..')")
-
-
-def _finish_run(raw: _RunRows, source: str, duplicates: str) -> RigRun:
-    """Convert and check the rows of one run; drop repeated timestamps (or raise).
-
-    Raises
-    ------
-    RigLogError
-        A non-numeric or non-finite value, time going backwards or, with
-        ``duplicates="error"``, a repeated timestamp.
-    """
-    lines = np.asarray(raw.lines, dtype=np.int64)
-    data = _rows_to_array(raw.rows, raw.lines, source)
-    _check_run_values(data, raw.rows, lines, source)
-    t = data[:, 0]
-    dup = np.nonzero(np.diff(t) == 0)[0] + 1
-    if dup.size and duplicates == "error":
-        k = int(dup[0])
-        raise RigLogError(f"{source}:{lines[k]}: duplicate timestamp t={float(t[k])!r} "
-                          f"(same as "
-                          f"line {lines[k - 1]}); {dup.size} duplicate(s) in this run")
-    events = raw.events
-    if dup.size:
-        keep = np.ones(t.shape[0], bool)
-        keep[dup] = False
-        events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in events]
-        data, lines = data[keep], lines[keep]
-    return RigRun(data=data, lines=lines, events=events, dropped_duplicates=int(dup.size))
+def _scan(lines: Iterable[str], source: str, duplicates: str,
+          gates: Gates | None) -> RigLog:
+    """One pass over ``lines`` (without their newlines); see :func:`parse_rig_log_text`."""
+    if duplicates not in ("drop", "error"):
+        raise ValueError(f"duplicates must be 'drop' or 'error', got {duplicates!r}")
+    scan = _LogScan(source=source, duplicates=duplicates, gates=gates)
+    for lineno, raw in enumerate(lines, start=1):
+        scan.n_lines = lineno
+        _scan_line(scan, raw, lineno)
+    scan.resolve_partial(final=True)
+    if scan.n_data == 0:
+        if scan.last_nonblank == 0:
+            raise RigLogError(f"{source}: file is empty (no data lines)")
+        counts = ", ".join(f"{k}: {v}" for k, v in sorted(scan.skipped.items()) if v) or "none"
+        raise RigLogError(f"{source}: no data lines ('[inf] t=...,torque=...,...') among "
+                          f"{scan.n_lines} line(s); skipped {counts}")
+    scan.finish_current()
+    if not scan.runs:
+        why = scan.dropped_runs[0].account.line() if scan.dropped_runs else "no run"
+        raise RigLogError(f"{source}: no sample passed the checks ({why})")
+    skipped_out = {k: v for k, v in scan.skipped.items() if v}
+    return RigLog(source=source, n_lines=scan.n_lines, n_data=scan.n_data,
+                  skipped=skipped_out, warnings=scan.warnings, runs=scan.runs)
 
 
 def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
-                       duplicates: str = "drop") -> RigLog:
+                       duplicates: str = "drop", gates: Gates | None = None) -> RigLog:
     """Parse the text of a rig log.
+
+    Every data line is accounted for: each run's
+    :class:`~bfr_model.io.account.ReadAccount` (``RigRun.account``) counts the lines that
+    were cut, corrupt, duplicate, out of order, out of range or not finite, and the physical
+    gates (:func:`bfr_model.io.account.gate_samples`) decide which samples are kept.
 
     Parameters
     ----------
@@ -454,6 +546,8 @@ def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
         ``t`` with 6 significant digits (0.1 ms above 10 s) and its loop sometimes runs two
         steps within one print quantum, so real logs hold a few (17-35 per file); ``"drop"``
         keeps the first and counts the rest in ``skipped["duplicate_time"]``.
+    gates : Gates, optional
+        Bounds of the physical gates (default: from rig.yaml).
 
     Returns
     -------
@@ -462,41 +556,29 @@ def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
     Raises
     ------
     RigLogError
-        Empty text, no data line, a data line with missing or unknown keys, a non-numeric,
-        NaN or infinite value, time going backwards inside a run (no restart marker) or,
-        with ``duplicates="error"``, a repeated timestamp. The message names the line.
+        Empty text, no data line, no sample passing the gates or, with
+        ``duplicates="error"``, a repeated timestamp. The message names the line.
     """
-    if duplicates not in ("drop", "error"):
-        raise ValueError(f"duplicates must be 'drop' or 'error', got {duplicates!r}")
     if isinstance(text, bytes):
         text = text.decode("utf-8", errors="replace")
-    if not text.strip():
-        raise RigLogError(f"{source}: file is empty (no data lines)")
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()  # text ended with a newline
-    scan = _LogScan(
-        source=source, ends_with_newline=text.endswith("\n"),
-        last_nonempty=max((i for i, ln in enumerate(lines) if ln.strip("\r \t")), default=-1))
-    for i, raw in enumerate(lines):
-        _scan_line(scan, raw, i)
+    return _scan(lines, source, duplicates, gates)
 
-    n_data = sum(len(r.rows) for r in scan.runs)
-    if n_data == 0:
-        counts = ", ".join(f"{k}: {v}" for k, v in sorted(scan.skipped.items()) if v) or "none"
-        raise RigLogError(f"{source}: no data lines ('[inf] t=...,torque=...,...') among "
-                          f"{len(lines)} line(s); skipped {counts}")
-    runs = [_finish_run(r, source, duplicates) for r in scan.runs if r.rows]
-    for run in runs:
-        scan.skipped["duplicate_time"] += run.dropped_duplicates
-    skipped_out = {k: v for k, v in scan.skipped.items() if v}
-    return RigLog(source=source, n_lines=len(lines), n_data=n_data, skipped=skipped_out,
-                  warnings=scan.warnings, runs=runs)
+
+def _file_lines(fh: BinaryIO) -> Iterator[str]:
+    """The lines of a binary file, decoded one by one (UTF-8, bad bytes replaced)."""
+    for raw in fh:
+        yield raw.rstrip(b"\n").decode("utf-8", errors="replace")
 
 
 def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
-                  warn: bool = True) -> RigLog:
-    """Read and parse a rig log file; see :func:`parse_rig_log_text`.
+                  warn: bool = True, gates: Gates | None = None) -> RigLog:
+    """Read and parse a rig log file line by line; see :func:`parse_rig_log_text`.
+
+    The file is streamed: memory holds the numbers of the runs (8 floats a line), never
+    the text.
 
     Parameters
     ----------
@@ -507,13 +589,16 @@ def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
     warn : bool
         Emit a :class:`RigLogWarning` for each recoverable problem (truncated final line,
         partial lines); they are always listed in :attr:`RigLog.warnings`.
+    gates : Gates, optional
+        Bounds of the physical gates (default: from rig.yaml).
     """
     p = Path(path)
+    gates = gates if gates is not None else Gates.from_params()
     try:
-        raw = p.read_bytes()
+        with p.open("rb") as fh:
+            log = _scan(_file_lines(fh), str(p), duplicates, gates)
     except OSError as exc:
         raise RigLogError(f"{p}: cannot read: {exc}") from exc
-    log = parse_rig_log_text(raw, source=str(p), duplicates=duplicates)
     if warn:
         for msg in log.warnings:
             warnings.warn(msg, RigLogWarning, stacklevel=2)
@@ -626,6 +711,10 @@ def _ball_fixes(run: RigRun, raw: _RigColumns, *, stale_after: float, drop_backl
     age = np.where(has_fix, t - t[np.maximum(last_fix, 0)], np.inf)
     lost = _ball_lost(run.events, fix_idx, n)
     valid = seen & has_fix & (age <= stale_after) & (idx >= backlog_end) & ~lost
+    if run.ball_off is not None and run.ball_off.any():
+        valid &= ~run.ball_off
+        notes.append(f"{int(run.ball_off.sum())} sample(s) hold a ball position off the frame: "
+                     f"invalid (see meta['read_account'])")
     if backlog_end > 0:
         notes.append(f"camera backlog: fixes before t = {t[min(backlog_end, n - 1)]:.4f} s "
                      f"arrived at the loop rate (frames queued since program start) and are "
@@ -821,6 +910,8 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     )
     rec.meta["sample_rate"] = rec.sample_rate()
     rec.meta["camera_fix_rate"] = rec.camera_fix_rate()
+    if run.account is not None:
+        rec.meta["read_account"] = run.account.to_json()
     return rec
 
 
