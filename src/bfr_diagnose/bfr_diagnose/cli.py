@@ -9,7 +9,13 @@ Examples::
 Method: docs/diagnosis.md (noise-injection null on the recording itself, equation error
 of both rows of the rigid model, library fits ranked on held-out data and BIC).
 
-Exit codes: 0 success, 2 bad input (unreadable, empty, garbage, truncated, NaN, too short).
+Every recording's read account (samples and seconds used against present, by cause) is
+printed in one line on stderr and written to report.md and diagnosis.json; more than 1 %
+lost stops unless ``--allow-partial``. ``--out-dir`` is written atomically and an existing
+one is replaced only with ``--force``.
+
+Exit codes: 0 success, 2 bad input (unreadable, empty, garbage, more than 1 % lost, NaN,
+too short, an existing --out-dir without --force).
 """
 
 from __future__ import annotations
@@ -21,10 +27,9 @@ import sys
 import time
 import warnings
 from pathlib import Path
-from typing import Any
 
-from bfr_model.io import read_recording
-from bfr_model.io.rig_log import parse_rig_log
+from bfr_model.io import account_line, read_runs
+from bfr_model.io.output import OutputError, check_new
 from bfr_model.params import ParameterError, load_params
 from bfr_model.recording import Recording
 
@@ -79,36 +84,27 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--t-from", type=float, help="analyse from this time [s]")
     p.add_argument("--t-to", type=float, help="analyse up to this time [s]")
     p.add_argument("--quiet", action="store_true", help="no progress on stderr")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing --out-dir (default: refuse)")
+    p.add_argument("--allow-partial", action="store_true",
+                   help="use a recording even when more than 1 %% of its samples could not be "
+                        "read (corrupt, truncated, duplicate, out of order or out of range; "
+                        "the read's account says which)")
     return p
 
 
-def _read(path: Path, topics: list[str], run: str | None) -> list[Recording]:
+def _read(path: Path, topics: list[str], run: str | None,
+          allow_partial: bool) -> list[Recording]:
     """The runs of the recording at ``path`` (a rig log's every run, or the one chosen)."""
-    if not path.exists():
-        raise DiagnoseError(f"{path}: no such file or directory")
-    if path.is_file() and path.stat().st_size == 0:
-        raise DiagnoseError(f"{path}: file is empty")
-    opts: dict[str, Any] = {}
-    if path.suffix.lower() == ".txt":
-        log = parse_rig_log(path, warn=False)
-        if run is None or run == "all":
-            return [log.recording(k) for k in range(len(log.runs))]
-        try:
-            k = int(run)
-        except ValueError:
-            raise DiagnoseError(f"--run {run!r}: expected an index or 'all'") from None
-        return [log.recording(k)]
-    if run is not None:
+    remap = {}
+    for item in topics:
+        if "=" not in item:
+            raise DiagnoseError(f"--topic {item!r}: expected NAME=TOPIC")
+        k, v = item.split("=", 1)
+        remap[k.strip()] = v.strip()
+    if run is not None and path.suffix.lower() != ".txt":
         raise DiagnoseError("--run applies to rig logs (.txt) only")
-    if topics:
-        remap = {}
-        for item in topics:
-            if "=" not in item:
-                raise DiagnoseError(f"--topic {item!r}: expected NAME=TOPIC")
-            k, v = item.split("=", 1)
-            remap[k.strip()] = v.strip()
-        opts["topic_map"] = remap
-    return [read_recording(path, **opts)]
+    return read_runs(path, run, allow_partial=allow_partial, topic_map=remap or None)
 
 
 def _options(args: argparse.Namespace, first: Recording) -> DiagnoseOptions:
@@ -139,11 +135,17 @@ def main(argv: list[str] | None = None) -> int:
                   flush=True)
 
     try:
+        if args.out_dir is not None:
+            check_new(args.out_dir, args.force)
         recordings = []
+        accounts = []
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
+            warnings.simplefilter("ignore")  # what the readers found is in their account
             for path in args.recordings:
-                runs = _read(path, args.topic, args.run)
+                runs = _read(path, args.topic, args.run, args.allow_partial)
+                # the read's account, one line, always (also with --quiet)
+                print(f"bfr diagnose: {account_line(runs)}", file=sys.stderr, flush=True)
+                accounts += [r.meta["read_account"] for r in runs if "read_account" in r.meta]
                 if args.t_from is not None or args.t_to is not None:
                     runs = [r.slice_time(args.t_from, args.t_to) for r in runs]
                 recordings.append((str(path), runs))
@@ -152,13 +154,14 @@ def main(argv: list[str] | None = None) -> int:
         base = load_params(args.params)
         opts = _options(args, recordings[0][1][0])
         d = diagnose_recordings(recordings, base, opts, progress=say)
+        d.findings["read_accounts"] = accounts
     except (DiagnoseError, ParameterError, ValueError, OSError) as exc:
         print(f"bfr diagnose: error: {exc}", file=sys.stderr)
         return 2
     if args.out_dir is not None:
         try:
             write_outputs(d, args.out_dir, plots=not args.no_plots, progress=say)
-        except OSError as exc:
+        except (OSError, OutputError) as exc:
             print(f"bfr diagnose: error: cannot write {args.out_dir}: {exc}", file=sys.stderr)
             return 2
         say(f"wrote {args.out_dir}/report.md, figures and corrected_params.yaml")

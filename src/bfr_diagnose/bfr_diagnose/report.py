@@ -145,6 +145,25 @@ def _nominal_values(d: Diagnosis) -> dict[tuple[str, str], float]:
     return out
 
 
+def _md_read(d: Diagnosis) -> list[str]:
+    """What each reader used against what its source held (the read accounts)."""
+    accounts = d.summary.get("read_accounts") or []
+    if not accounts:
+        return []
+    L = ["## What was read", "",
+         "| source | samples used / present | seconds used / present | lost | by cause |",
+         "| --- | --- | --- | --- | --- |"]
+    for a in accounts:
+        causes = ", ".join(f"{k} {v}" for k, v in {**a["dropped"], **a["degraded"]}.items())
+        sp = a["seconds_present"]
+        L.append(f"| `{Path(a['source']).name}` | {a['samples_used']} / "
+                 f"{'' if a['exact'] else '~'}{a['samples_present']} | "
+                 f"{a['seconds_used']:.3f} / {'?' if sp is None else f'{sp:.3f}'} | "
+                 f"{100 * a['lost_fraction']:.2f} % | {causes or 'none'} |")
+    actions = [f"- `{Path(a['source']).name}`: {x}" for a in accounts for x in a["actions"]]
+    return [*L, "", *actions, ""] if actions else [*L, ""]
+
+
 def _md_physics(d: Diagnosis) -> list[str]:
     s = d.summary
     if not s["parameters"]:
@@ -290,7 +309,7 @@ def _markdown(d: Diagnosis, figs: list[str]) -> str:
     if degen:
         L += ["## Degenerate fits (not added)", ""]
         L += [f"- {c['note']}" for c in degen] + [""]
-    L += _md_sensors(d) + _md_fit(d) + _md_where(d) + _md_ranking(d)
+    L += _md_read(d) + _md_sensors(d) + _md_fit(d) + _md_where(d) + _md_ranking(d)
     L += ["## Figures", ""] + [f"![{f}]({f})" for f in figs] + [""]
     L += ["Files: `corrected_params.yaml` (physics: run it with `bfr simulate --params` or as "
           "the simulator node's parameter file; suspects left out), `sensor_model.yaml` (each "
