@@ -30,7 +30,10 @@ position farther from the axis than the frame reaches). The lost fraction is
 
 and the one rule of the project (:func:`enforce`): more than :data:`LOSS_LIMIT` lost stops
 the read with :class:`PartialReadError` unless the caller allows a partial read (every CLI
-that reads recordings: ``--allow-partial``). The rule is applied only there.
+that reads recordings: ``--allow-partial``). So does an account whose ``samples_present``
+is only an estimate (a bag cut short with neither summary nor metadata.yaml: what followed
+the cut is unknown, so the loss cannot be shown to be small). The rule is applied only
+there.
 
 Physical gates (:func:`gate_samples`), the same for every reader, in this order:
 
@@ -43,7 +46,8 @@ Physical gates (:func:`gate_samples`), the same for every reader, in this order:
    read that often cannot tell the direction; no hardware of the design turns that fast):
    isolated spikes are dropped, and at a lasting jump the longest continuous stretch is kept,
    the rest dropped (``out_of_range``);
-4. a rate with ``|theta_dot| dt > pi`` (half a turn per median sample interval) or a torque
+4. a rate (``theta_dot``, a logged ball-angle rate) with ``|rate| dt > pi`` (half a turn
+   per median sample interval) or a torque
    beyond :attr:`Gates.max_torque` is dropped (``out_of_range``);
 5. a ball centre farther from the axis than :attr:`Gates.max_ball_radius` is excluded
    (``degraded["ball_off_frame"]``; the sample's encoder and torque are used).
@@ -244,7 +248,13 @@ def enforce(account: ReadAccount, allow_partial: bool, limit: float = LOSS_LIMIT
     PartialReadError
         One line: the account and how to read anyway.
     """
-    if allow_partial or account.lost_fraction <= limit:
+    if allow_partial:
+        return
+    if not account.exact:
+        raise PartialReadError(f"{account.line()}; the source's end is missing and nothing "
+                               f"says how many samples it held: refused (--allow-partial uses "
+                               f"what was read)")
+    if account.lost_fraction <= limit:
         return
     raise PartialReadError(f"{account.line()}; more than {100 * limit:g} % lost: refused "
                            f"(--allow-partial uses what was read)")
@@ -399,6 +409,7 @@ def gate_samples(t: NDArray[np.float64], theta: NDArray[np.float64],
                  ball_x: NDArray[np.float64] | None = None,
                  ball_y: NDArray[np.float64] | None = None, *,
                  others: Iterable[NDArray[np.float64]] = (),
+                 rates: Iterable[NDArray[np.float64]] = (),
                  gates: Gates | None = None) -> GateResult:
     """Apply the physical gates (module doc, steps 1-5) to one run's samples.
 
@@ -410,6 +421,8 @@ def gate_samples(t: NDArray[np.float64], theta: NDArray[np.float64],
         Ball centre [m] where a fix is held (NaN or absent where none).
     others : iterable of ndarray
         Further columns that must be finite for a sample to be kept.
+    rates : iterable of ndarray
+        Further angle rates [rad/s] held to the rate bound of step 4 (NaN passes).
     gates : Gates, optional
         The bounds (default: :meth:`Gates.from_params` of rig.yaml).
 
@@ -432,7 +445,10 @@ def gate_samples(t: NDArray[np.float64], theta: NDArray[np.float64],
     idx = np.nonzero(keep)[0]
     if idx.size >= 2:
         dt = float(np.median(np.diff(t[idx])))
-        fast = np.abs(theta_dot[idx]) * dt > g.max_angle_step
+        with np.errstate(invalid="ignore", over="ignore"):
+            fast = np.abs(theta_dot[idx]) * dt > g.max_angle_step
+            for r in rates:
+                fast |= np.abs(r[idx]) * dt > g.max_angle_step
     else:
         fast = np.zeros(idx.size, bool)
     _drop(keep, idx, fast | (np.abs(torque[idx]) > g.max_torque), "out_of_range", dropped,

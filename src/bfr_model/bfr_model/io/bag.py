@@ -765,6 +765,11 @@ class _McapWalk:
             else:
                 raise
         except Exception as exc:  # noqa: BLE001 - EndOfFile, struct, limits, bad opcodes
+            if where >= size and isinstance(exc, (EndOfFile, EOFError)):
+                self.failures.append(f"no footer (the writer did not finish): read to the "
+                                     f"last intact chunk, all {size} bytes; what followed it "
+                                     f"is unknown")
+                return
             self.stopped_at = where
             self.end_of_file = isinstance(exc, (EndOfFile, EOFError))
             what = ("file ends inside a record (truncated)" if self.end_of_file
@@ -863,7 +868,7 @@ def _lost_messages(walk: _McapWalk, summary: Any, yaml_counts: dict[str, int] | 
             if rest > 0:
                 lost.setdefault(topic, {})[tail] = lost.get(topic, {}).get(tail, 0) + rest
         return lost, True, span
-    exact = True
+    exact = walk.footer  # without footer nor index nothing says what followed the cut
     if read_to < size and read:
         exact = False
         frac = (size - read_to) / max(read_to, 1)

@@ -188,7 +188,8 @@ def _split_table(p: Path, text: str) -> _CsvTable:
         line = raw.strip()
         if not line:
             continue
-        if line.startswith("#"):
+        if line.startswith("#") and not (header is not None
+                                         and line.count(",") == len(header) - 1):
             if header is None and ":" in line:
                 key, _, value = line[1:].partition(":")
                 meta[key.strip()] = _meta_value(value.strip())
@@ -343,7 +344,7 @@ def _gated(p: Path, table: _CsvTable, col: dict[str, np.ndarray],
            gates: Gates | None) -> tuple[dict[str, np.ndarray], ReadAccount]:
     """The columns of the samples the physical gates keep, and the read's account."""
     g = gate_samples(col["t"], col["theta"], col["theta_dot"], col["torque"], col["ball_x"],
-                     col["ball_y"], gates=gates)
+                     col["ball_y"], rates=(col["phi_dot"],), gates=gates)
     lines = table.row_lines
     dropped = dict(g.dropped)
     for cause, where in table.lost.items():

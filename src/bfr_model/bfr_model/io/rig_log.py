@@ -403,6 +403,19 @@ def _is_float(text: str) -> bool:
     return True
 
 
+#: Keys after the first of a data line, as they appear in it.
+_LATER_KEYS = tuple(f",{k}=" for k in KEYS[1:])
+
+
+def _looks_like_data(line: str) -> bool:
+    """A line holding at least half of a data line's keys: a damaged data line, not noise.
+
+    One damaged byte (a flipped bit, a stray carriage return or escape) breaks at most one
+    key; such a line is lost data and counted ``corrupt``, never skipped as noise.
+    """
+    return sum(k in line for k in _LATER_KEYS) >= len(_LATER_KEYS) // 2 + 1
+
+
 def _scan_data_segments(scan: _LogScan, text: str, lineno: int) -> None:
     """Parse ``text``, one or more data lines run together (``[inf] t=...[inf] t=...``).
 
@@ -446,14 +459,21 @@ def _scan_line(scan: _LogScan, raw: str, lineno: int) -> None:
     m = _DATA_RE.fullmatch(clean)
     if m is not None:
         scan.add_data(m.groups(), lineno)
+    elif "[inf] t=" not in clean and _looks_like_data(line):
+        scan.lose("corrupt", "malformed", lineno,
+                  f"{scan.source}:{lineno}: damaged data line skipped: {line[:120]!r}")
     elif not clean:
         scan.skipped["empty"] += 1
     elif clean.startswith("[obs]"):
         scan.skipped["obs"] += 1
     elif (pos := clean.find("[inf] t=")) >= 0:
         _scan_data_segments(scan, clean[pos:], lineno)
+    elif clean.startswith("[inf]") and "[inf] t=".startswith(clean):
+        scan.pending_partial = (lineno, "cut inside the line's prefix", scan.current)
     elif clean.startswith("[inf]"):
         scan.add_info(clean[len("[inf]"):].strip())
+    elif "[inf] t=".startswith(clean) and line == clean:
+        scan.pending_partial = (lineno, "cut inside the line's prefix", scan.current)
     else:
         scan.skipped["terminal"] += 1
 
@@ -474,7 +494,8 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
     no_ball = (col["x"] == 0.0) & (col["y"] == 0.0)
     g = gate_samples(col["t"], col["theta"], col["dtheta"], col["torque"],
                      np.where(no_ball, np.nan, col["x"]), np.where(no_ball, np.nan, col["y"]),
-                     others=(col["phi"], col["dphi"], col["x"], col["y"]), gates=gates)
+                     others=(col["phi"], col["dphi"], col["x"], col["y"]),
+                     rates=(col["dphi"],), gates=gates)
     if g.dropped.get("duplicate") and duplicates == "error":
         k = g.first["duplicate"]
         raise RigLogError(f"{source}:{lines[k]}: duplicate timestamp t={float(col['t'][k])!r} "
