@@ -116,7 +116,13 @@ def read_runs(path: str | Path, run: str | int | None = None, *, allow_partial: 
     accounts = [r.account for r in log.runs if r.account is not None]
     if accounts:
         enforce(ReadAccount.combine(accounts), allow_partial)
-    return [log.recording(k) for k in ks]
+    out = []
+    for k in ks:
+        out.append(log.recording(k))
+        run = log.runs[k]  # its numbers are in the recording now: free the raw copy
+        run.data, run.lines = run.data[:0], run.lines[:0]
+        run.ball_off = None if run.ball_off is None else run.ball_off[:0]
+    return out
 
 
 def account_line(recs: list[Recording]) -> str:

@@ -213,7 +213,11 @@ class ReadAccount:
 
     @classmethod
     def combine(cls, accounts: Iterable[ReadAccount]) -> ReadAccount:
-        """One account of several reads of one source (e.g. the runs of one rig log)."""
+        """One account of several reads of one source (e.g. the runs of one rig log).
+
+        Counts add up; of the actions, the first of each kind is kept (where it first
+        happened in the file).
+        """
         acc = list(accounts)
         if not acc:
             raise ValueError("combine: no accounts")
@@ -225,12 +229,16 @@ class ReadAccount:
             for k, c in a.degraded:
                 degraded[k] = degraded.get(k, 0) + c
         label = f" ({len(acc)} runs)" if len(acc) > 1 else ""
+        actions: dict[str, str] = {}  # the first of each kind (the runs are in file order)
+        for a in acc:
+            for x in a.actions:
+                actions.setdefault(x.split(":", 1)[0], x)
         return cls(source=acc[0].source + label, kind=acc[0].kind,
                    samples_present=sum(a.samples_present for a in acc),
                    samples_used=sum(a.samples_used for a in acc),
                    seconds_present=sum(a.seconds_present for a in acc),
                    seconds_used=sum(a.seconds_used for a in acc), dropped=dropped,
-                   degraded=degraded, actions=[x for a in acc for x in a.actions],
+                   degraded=degraded, actions=list(actions.values()),
                    exact=all(a.exact for a in acc))
 
 
