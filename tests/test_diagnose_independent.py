@@ -21,7 +21,7 @@ from bfr_model.params import load_params
 from independent import physics, rig_log
 
 pytestmark = pytest.mark.slow
-DURATION = 10.0
+DURATION = 12.0
 
 
 def _diagnose(tmp_path: Path, seed: int, **effects: float) -> dict:
