@@ -50,3 +50,13 @@ def test_concealed_contour_radius_found_on_the_independent_rig(tmp_path: Path) -
     out = _diagnose(tmp_path, 4, contour_radius_delta=1.5e-3)
     assert out["effects_selected"] == ["frame_contour"], out["effects_selected"]
     assert out["effects"] == ["frame_contour"], out["suspects"]
+
+
+def test_direction_dependent_friction_is_coulomb_plus_offset(tmp_path: Path) -> None:
+    # seed 5: exact velocity, 500 Hz lines, 202 Hz camera; Karnopp friction 3.0 mN m against
+    # positive rotation, 4.5 mN m against negative: T_c -+ tau_0 in bfr's library
+    out = _diagnose(tmp_path, 5, coulomb_pos=3.0e-3, coulomb_neg=4.5e-3)
+    assert sorted(out["effects"]) == ["joint_coulomb_friction", "torque_offset"], out["effects"]
+    val = {p["name"]: p["value"] for p in out["parameters"]}
+    assert val["T_c"] - val["tau_0"] == pytest.approx(3.0e-3, abs=2e-4)
+    assert val["T_c"] + val["tau_0"] == pytest.approx(4.5e-3, abs=2e-4)
