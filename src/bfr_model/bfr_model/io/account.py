@@ -81,6 +81,7 @@ __all__ = [
     "PartialReadError",
     "ReadAccount",
     "account_of",
+    "covered_seconds",
     "enforce",
     "gate_samples",
 ]
@@ -129,7 +130,8 @@ class ReadAccount:
     seconds_present : float
         Time spanned by the samples present [s] (NaN when not known).
     seconds_used : float
-        Time spanned by the samples used [s].
+        Time covered by the samples used [s]: their span less its holes
+        (:func:`covered_seconds`).
     dropped : tuple of (str, int)
         Samples not used, by cause (:data:`CAUSES`); ``samples_present - samples_used``.
     degraded : tuple of (str, int)
@@ -240,6 +242,21 @@ class ReadAccount:
                    seconds_used=sum(a.seconds_used for a in acc), dropped=dropped,
                    degraded=degraded, actions=list(actions.values()),
                    exact=all(a.exact for a in acc))
+
+
+def covered_seconds(t: NDArray[np.float64], hole: float = 3.0) -> float:
+    """Time covered by samples at times ``t`` [s]: their span less the holes in it.
+
+    A hole is an interval longer than ``hole`` times the median interval (a corrupt chunk,
+    a run of dropped lines); the seconds used by a read do not count it.
+    """
+    t = np.asarray(t, float)
+    t = t[np.isfinite(t)]
+    if t.size < 2:
+        return 0.0
+    d = np.diff(np.sort(t))
+    med = float(np.median(d))
+    return float(np.sum(d[d <= hole * med])) if med > 0 else float(t.max() - t.min())
 
 
 def account_of(rec: Any) -> ReadAccount | None:

@@ -63,7 +63,7 @@ from numpy.typing import NDArray
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-from bfr_model.io.account import Gates, ReadAccount, gate_samples
+from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
 from bfr_model.param_file import ParameterError, share_path
 from bfr_model.recording import Recording, RecordingError
 
@@ -1333,10 +1333,12 @@ def _account(contents: BagContents, names: dict[str, str], js: _JointStates,
     if others:
         actions.append("messages of other topics lost: " + ", ".join(others))
     span = contents.span_ns / _NS if contents.span_ns is not None else js.account["span"]
+    used = covered_seconds(t)
+    present = max(span, used) if contents.lost_exact else float("nan")
     return ReadAccount(source=str(contents.path), kind="bag",
                        samples_present=js.account["present"] + sum(topic_lost.values()),
-                       samples_used=int(t.size), seconds_present=max(span, float(t[-1] - t[0])),
-                       seconds_used=float(t[-1] - t[0]), dropped=dropped,
+                       samples_used=int(t.size), seconds_present=present,
+                       seconds_used=used, dropped=dropped,
                        degraded={"ball_off_frame": ball_off}, actions=actions,
                        exact=contents.lost_exact)
 

@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from bfr_model.io.account import Gates, ReadAccount, gate_samples
+from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
 from bfr_model.recording import OPTIONAL_FIELDS, Recording, RecordingError, ball_centre_angle
 
 __all__ = ["CSV_COLUMNS", "CsvFormatError", "read_csv", "write_csv"]
@@ -358,8 +358,8 @@ def _gated(p: Path, table: _CsvTable, col: dict[str, np.ndarray],
         source=str(p), kind="csv",
         samples_present=len(lines) + sum(len(w) for w in table.lost.values()),
         samples_used=int(g.keep.sum()),
-        seconds_present=float(t_all.max() - t_all.min()) if t_all.size else 0.0,
-        seconds_used=float(kept[-1] - kept[0]) if kept.size else 0.0,
+        seconds_present=covered_seconds(t_all),
+        seconds_used=covered_seconds(kept),
         dropped=dropped, degraded={"ball_off_frame": int(g.ball_off.sum())}, actions=actions)
     if not g.keep.any():
         raise CsvFormatError(f"{p}: no row passed the checks: {account.line()}")

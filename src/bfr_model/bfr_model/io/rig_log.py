@@ -60,7 +60,7 @@ from typing import Any, BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-from bfr_model.io.account import Gates, ReadAccount, gate_samples
+from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
 from bfr_model.io.timing import camera_backlog_end, line_rate, velocity_lag
 from bfr_model.recording import Recording
 
@@ -514,8 +514,8 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
     account = ReadAccount(
         source=source, kind="rig_log", samples_present=len(raw) + sum(
             len(w) for w in raw.lost.values()), samples_used=int(keep.sum()),
-        seconds_present=float(t_all.max() - t_all.min()) if t_all.size else 0.0,
-        seconds_used=float(kept_t[-1] - kept_t[0]) if kept_t.size else 0.0,
+        seconds_present=covered_seconds(t_all),
+        seconds_used=covered_seconds(kept_t),
         dropped=dropped, degraded={"ball_off_frame": int(g.ball_off.sum())}, actions=actions)
     return RigRun(data=data[keep], lines=lines[keep], events=events,
                   dropped_duplicates=int(g.dropped.get("duplicate", 0)),
