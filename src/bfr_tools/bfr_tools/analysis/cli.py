@@ -291,7 +291,10 @@ def _corrected_paths(args: argparse.Namespace) -> list[Path | None]:
         d = args.out_dir / f"diagnose_{rec.stem}"
         progress(f"bfr diagnose {rec} --out-dir {d}")
         with contextlib.redirect_stdout(io.StringIO()):  # its report is in d/report.md
-            code = diagnose_main([str(rec), "--out-dir", str(d), "--no-plots", "--quiet"])
+            # its own folder under --out-dir, remade on every run (as the plots are)
+            code = diagnose_main([str(rec), "--out-dir", str(d), "--no-plots", "--quiet",
+                                  "--force",
+                                  *(["--allow-partial"] if args.allow_partial else [])])
         if code != 0 or not (d / "corrected_params.yaml").is_file():
             raise ValueError(f"bfr diagnose failed on {rec} (exit {code}); run it alone to "
                              "see why")
