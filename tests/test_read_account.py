@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bfr_model.io import read_recording
-from bfr_model.io.account import LOSS_LIMIT, PartialReadError, ReadAccount
+from bfr_model.io.account import LOSS_LIMIT, PartialReadError, ReadAccount, enforce
 from bfr_model.io.bag import BagWriter, read_bag, write_recording_bag
 from bfr_model.io.csv_io import write_csv
 from bfr_model.io.output import OutputError, atomic_dir, atomic_file
@@ -443,3 +443,27 @@ def test_simulate_out_refuses_existing_files_and_bags(tmp_path: Path) -> None:
         assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
         assert "exists already (--force replaces it)" in r.stderr
     assert (tmp_path / "s.csv").read_text() == "keep"
+
+
+# -- the account itself ---------------------------------------------------------------------
+def test_account_balances_and_the_one_rule() -> None:
+    def acc(used: int, present: int = 1000, exact: bool = True, **dropped: int) -> ReadAccount:
+        return ReadAccount(source="s", kind="csv", samples_present=present, samples_used=used,
+                           seconds_present=1.0, seconds_used=1.0, dropped=dropped, exact=exact)
+
+    with pytest.raises(ValueError, match="does not balance"):
+        acc(990, duplicate=5)
+    with pytest.raises(ValueError, match="unknown cause"):
+        acc(990, lost=10)
+    ok = acc(990, duplicate=10)  # exactly 1 %: read
+    enforce(ok, allow_partial=False)
+    over = acc(989, duplicate=10, corrupt=1)
+    with pytest.raises(PartialReadError, match=r"1.10 % lost: 1 corrupt, 10 duplicate"):
+        enforce(over, allow_partial=False)
+    enforce(over, allow_partial=True)
+    with pytest.raises(PartialReadError, match="nothing says how many"):
+        enforce(acc(1000, exact=False), allow_partial=False)
+    both = ReadAccount.combine([ok, over])
+    assert (both.samples_present, both.samples_used, dict(both.dropped)) == (
+        2000, 1979, {"corrupt": 1, "duplicate": 20})
+    assert ReadAccount.from_json(over.to_json()) == over
