@@ -17,6 +17,10 @@ contact-angle file puts them into ``phi_true`` / ``phi_dot_true`` and computes t
 recording's ``phi`` (ball-centre angle) from ``theta, ball_x, ball_y``, unless a
 ``phi_ball`` column holds it. A ``ball_valid`` column (0/1) is optional; without it a sample
 is valid where ``ball_x`` and ``ball_y`` are finite.
+
+Every data row is accounted for (``meta["read_account"]``, :mod:`bfr_model.io.account`):
+rows cut short, with another number of fields or a cell that is not a number, and rows the
+physical gates stop are left out and counted by cause with their line.
 """
 
 from __future__ import annotations

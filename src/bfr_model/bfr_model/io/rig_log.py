@@ -10,6 +10,14 @@ per reason in :attr:`RigLog.skipped`. ``[inf] initializing hardware..`` starts a
 (one file may hold several runs whose clocks restart, e.g. ``step_response_tau_001``);
 ``[inf] ball was lost`` marks the held camera fix as stale.
 
+Every data line is accounted for (:mod:`bfr_model.io.account`): the file is read line by
+line (its numbers go straight into float arrays; the text is never held), each run's lines
+pass the physical gates, and the run's :class:`~bfr_model.io.account.ReadAccount`
+(``RigRun.account``, ``meta["read_account"]``) counts those not used by cause: ``corrupt``
+(a line with keys missing or a value that is not a number, a line cut by another, a line
+so damaged that only most of its keys are left), ``truncated`` (the last line cut off),
+``duplicate``, ``out_of_order``, ``out_of_range``, ``non_finite``.
+
 The conventions of the format were inferred from the NTNU rig's logs
 (docs/ntnu-rig-conventions.md, ``python -m bfr_model.io.rig_conventions``) and are applied by
 :func:`run_to_recording`. What is a fact of one rig (its timing) is never assumed: it is
