@@ -25,6 +25,7 @@ from bfr_model.params import params_to_ros_yaml
 
 from bfr_diagnose.api import Diagnosis, PartResult
 from bfr_diagnose.effects import DESTINATION, EFFECTS, display_values
+from bfr_diagnose.synth import SynthConfig, stabilised_recording
 
 __all__ = ["corrected_yaml", "format_text", "phi_dot_profiles", "sensor_yaml",
            "write_outputs"]
@@ -486,8 +487,6 @@ def phi_dot_profiles(d: Diagnosis, pr: PartResult, duration: float = 15.0,
     against the nominal plant and against the corrected plant (:attr:`Diagnosis.corrected`:
     the plausible effects), started on the controller's orbit; the first 3 s are dropped.
     """
-    from bfr_diagnose.synth import SynthConfig, stabilised_recording  # noqa: PLC0415 - lazy: plots only
-
     edges = np.linspace(0.0, np.pi, n_bins + 1)
     centres = 0.5 * (edges[1:] + edges[:-1])
 
