@@ -196,6 +196,8 @@ def _md_sensors(d: Diagnosis) -> list[str]:
     for r in s["sensor_timing"]:
         add = lat0 if r["name"] == "latency" else 0.0
         name = "camera latency (total)" if r["name"] == "latency" else r["description"]
+        if r.get("at_bound") is not None:
+            name += " (**at its bound: not identified**)"
         L.append(f"| {Path(r['recording']).name} | {name} | {r['value'] + add:.4g} | "
                  f"{_num(r['ci95'][0] + add)} .. {_num(r['ci95'][1] + add)} | {r['unit']} |")
     for pr in d.parts:
