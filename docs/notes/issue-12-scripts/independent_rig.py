@@ -19,10 +19,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "tests"))
-from bfr_diagnose.api import diagnose_recordings  # noqa: E402
-from bfr_model.io.rig_log import parse_rig_log  # noqa: E402
-from bfr_model.params import load_params  # noqa: E402
-from independent import physics, rig_log  # noqa: E402
+from bfr_diagnose.api import diagnose_recordings
+from bfr_model.io.rig_log import parse_rig_log
+from bfr_model.params import load_params
+from independent import physics, rig_log
 
 
 def main() -> int:
