@@ -376,9 +376,10 @@ def _notes(suspects: dict[str, str], results: list[PartResult],
 def _bound_notes(sel: Selection) -> list[str]:
     """A note for every sensor value that ran to its bound (not identified there)."""
     return [f"{r['recording']}: the sensor model's {r['name']} ({r['description']}) ran to its "
-            f"bound {r['at_bound']:g} {r['unit']}: not identified by this recording; it "
-            "stands in for something the model lacks, so read the physics fitted beside it "
-            "with care." for r in sel.sensor_table if r.get("at_bound") is not None]
+            f"bound {r['at_bound']:g} {r['unit']}: not identified by this recording (either "
+            "the recording does not show it, e.g. a timing at constant speed, or it stands in "
+            "for something the model lacks; then read the physics fitted beside it with "
+            "care)." for r in sel.sensor_table if r.get("at_bound") is not None]
 
 
 # -- per recording ---------------------------------------------------------------------------
