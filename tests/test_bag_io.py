@@ -59,6 +59,31 @@ def sim_like(n: int = 300) -> Recording:
                                               potential=np.linspace(0, 1e-3, n), info={}))
 
 
+def _differences(rec: Recording, back: Recording, **tol: float) -> list[str]:
+    """``rec.differences(back)`` but for the fixes' stamps the reader adds: without stamps
+    of their own, the fixes are stamped at the sample where they appear (their arrival)."""
+    stamp = back.extra.pop("ball_stamp")
+    new = rec.new_fix_mask()
+    np.testing.assert_allclose(back.fix_times(), rec.t[new], atol=1e-9)
+    assert np.all(stamp[rec.ball_valid] <= rec.t[rec.ball_valid] + 1e-9)
+    return rec.differences(back, **tol)
+
+
+def test_ball_observations_placed_at_their_header_stamps(tmp_path: Path) -> None:
+    """Fixes stamped at exposure (before they arrive): the reader places them at the stamp
+    and keeps it as the fix's time; a fix without a stamp is placed at its receive time."""
+    rec = rig_like()
+    stamps = rec.t - 0.004  # exposures 4 ms before the samples where the fixes appear
+    new = rec.new_fix_mask()
+    held = np.maximum.accumulate(np.where(new, np.arange(rec.n), 0))
+    rec.extra["ball_stamp"] = np.where(rec.ball_valid, stamps[held], np.nan)
+    write_recording_bag(tmp_path / "bag", rec)
+    back = read_bag(tmp_path / "bag")
+    np.testing.assert_allclose(back.fix_times(), stamps[new], atol=1e-9)
+    assert any("header stamp" in n for n in back.meta["notes"])
+    assert not any("no header stamp" in n for n in back.meta["notes"])
+
+
 def test_custom_msg_dirs_found() -> None:
     """The installed share/bfr_interfaces/msg (or the source tree's) holds the definitions."""
     dirs = find_msg_dirs()
@@ -74,7 +99,7 @@ def test_round_trip_rig_like(tmp_path: Path) -> None:
     assert (tmp_path / "bag" / "metadata.yaml").exists()
     assert (tmp_path / "bag" / "bag.mcap").exists()
     back = read_bag(tmp_path / "bag")
-    assert rec.differences(back, rtol=0, atol=1e-9) == []
+    assert _differences(rec, back, rtol=0, atol=1e-9) == []
     assert back.meta["rig_conventions"] == {"theta_sign": 1}
     assert back.meta["original_source"] == "x.txt"
     assert back.meta["bag_complete"] is True
@@ -85,7 +110,7 @@ def test_round_trip_simulation_with_truth(tmp_path: Path) -> None:
     rec = sim_like()
     write_recording_bag(tmp_path / "bag", rec)
     back = read_bag(tmp_path / "bag")
-    assert rec.differences(back, rtol=0, atol=1e-9) == []
+    assert _differences(rec, back, rtol=0, atol=1e-9) == []
     assert back.has_truth and "truth" in back.meta["bag_topics"]
 
 
@@ -97,7 +122,7 @@ def test_remapped_topics_and_slashes(tmp_path: Path) -> None:
         read_bag(tmp_path / "bag")
     back = read_bag(tmp_path / "bag", topic_map={"joint_states": "/rig/joint_states",
                                                  "truth": "/gt"})
-    assert rec.differences(back, atol=1e-9) == []
+    assert _differences(rec, back, atol=1e-9) == []
     with pytest.raises(BagError, match="unknown topic role"):
         read_bag(tmp_path / "bag", topic_map={"camera": "x"})
 

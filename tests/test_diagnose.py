@@ -1,10 +1,12 @@
 """Tests of ``bfr diagnose``: each effect's recovery, the clean control, pairs found as two,
-bad inputs, bags (written by the recorder's writer, and by ``bfr simulate``), and the real
-rig's logs.
+sensor timing measured per recording (never assumed), frame-held runs, short runs, one rig
+from many recordings, the contact model as a truth of another structure, bad inputs, bags
+(header stamps), suspects kept out of the corrected parameters, and the real rig's logs.
 
 Synthetic recordings come from :mod:`bfr_diagnose.synth` (the node suite's controller in
 closed loop, camera noise 0.1 mm); every diagnosis uses the default noise-injection null,
-as a user's.
+as a user's. Several go through rig-log text or a bag and back, so that the readers a
+user's file goes through are part of what is tested.
 """
 
 from __future__ import annotations
@@ -18,49 +20,54 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from bfr_diagnose.api import DiagnoseOptions, diagnose_recording
+from bfr_diagnose.api import DiagnoseOptions, diagnose_recording, diagnose_recordings
 from bfr_diagnose.effects import EFFECT_NAMES
-from bfr_diagnose.synth import LogConventions, SynthConfig, stabilised_recording
+from bfr_diagnose.synth import (
+    LogConventions,
+    SynthConfig,
+    contact_recording,
+    held_frame_recording,
+    stabilised_recording,
+)
 from bfr_model.io.csv_io import write_csv
+from bfr_model.io.rig_log import read_rig_log, write_rig_log
 from bfr_model.params import RigParams, load_params
+from bfr_model.recording import Recording
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "ntnu-rig"
-DUR = 12.0
+DUR = 10.0
 BLOCK = 1.5
 
-# hidden effect -> (RigParams changes, camera settings of SynthConfig, parameter name, true
-# value); a float camera setting is the camera latency [s]
+# concealed effect -> (RigParams changes, parameter name, true value, nominal value)
 CASES = {
-    "joint_coulomb_friction": ({"joint.coulomb_friction": 2e-3}, 0.0, "T_c", 2e-3),
-    "joint_viscous_friction": ({"joint.viscous_friction": 6e-4}, 0.0, "c_v", 6e-4),
-    "rolling_resistance": ({"track.rolling_resistance": 1e-2}, 0.0, "mu_rol", 1e-2),
+    "joint_coulomb_friction": ({"joint.coulomb_friction": 2e-3}, "T_c", 2e-3, 0.0),
+    "joint_viscous_friction": ({"joint.viscous_friction": 6e-4}, "c_v", 6e-4, 0.0),
+    "torque_offset": ({"actuator.torque_offset": -1.2e-3}, "tau_0", -1.2e-3, 0.0),
+    "frame_imbalance": ({"frame.imbalance": 1.5e-4, "frame.imbalance_angle": 0.0}, "M_y",
+                        1.5e-4, 0.0),
+    "frame_inertia": ({"frame.inertia": 1.58e-3 * 1.1}, "J_f", 1.58e-3 * 1.1, 1.58e-3),
+    "torque_gain": ({"actuator.torque_gain": 0.9}, "k_u", 0.9, 1.0),
+    "rolling_resistance": ({"track.rolling_resistance": 1e-2}, "mu_rol", 1e-2, 0.0),
     "track_bumps": ({"track.bump_phi": (2.0,), "track.bump_height": (6e-4,),
-                     "track.bump_width": (0.12,)}, 0.0, "h", 6e-4),
-    "frame_inertia": ({"frame.inertia": 1.58e-3 * 1.1}, 0.0, "J_f", 1.58e-3 * 1.1),
-    "ball_radius": ({"ball.radius": 16.6e-3 * 0.97}, 0.0, "R_b", 16.6e-3 * 0.97),
-    "ball_mass": ({"ball.mass": 3.3e-3}, 0.0, "m_b", 3.3e-3),
+                     "track.bump_width": (0.12,)}, "h", 6e-4, 0.0),
+    "ball_mass": ({"ball.mass": 3.3e-3, "ball.inertia": 5.48e-7 * 1.1}, "m_b", 3.3e-3, 3e-3),
+    "ball_inertia": ({"ball.inertia": 5.48e-7 * 0.9}, "J_b", 5.48e-7 * 0.9, 5.48e-7),
+    "plate_distance": ({"ball.plate_distance": 26.5e-3}, "d_f", 26.5e-3, 25.5e-3),
+    "frame_contour": ({"frame.contour.a": 0.1101}, "a", 0.1101, 0.1095),
     "frame_shape": ({"frame.contour.harmonic_orders": (3,), "frame.contour.harmonic_cos":
-                     (3e-4,), "frame.contour.harmonic_sin": (0.0,)}, 0.0, "c_3", 3e-4),
-    "axis_misalignment": ({"environment.axis_misalignment": 0.25}, 0.0, "eps", 0.25),
-    "camera_latency": ({}, 0.008, "L", 0.008),
-    "torque_gain": ({"actuator.torque_gain": 0.9}, 0.0, "k_u", 0.9),
-    # the NTNU logs show a few mm (docs/ntnu-rig-conventions.md section 4)
-    "camera_offset": ({}, {"camera_offset": (3e-3, -2e-3)}, "c_x", 3e-3),
+                     (3e-4,), "frame.contour.harmonic_sin": (0.0,)}, "c_3", 3e-4, 0.0),
 }
-NOMINAL = {"T_c": 0.0, "c_v": 0.0, "mu_rol": 0.0, "h": 0.0, "J_f": 1.58e-3, "R_b": 16.6e-3,
-           "m_b": 3e-3, "c_3": 0.0, "eps": 0.0, "L": 0.0, "k_u": 1.0, "c_x": 0.0}
 
 
-def _rec(changes: dict, camera: float | dict, seed: int):  # noqa: ANN202
+def _rec(changes: dict, seed: int, log: LogConventions | None = None,
+         latency: float = 0.0, duration: float = DUR) -> Recording:
     base = RigParams()
     plant = base.replace(**changes) if changes else base
-    cam = camera if isinstance(camera, dict) else {"camera_latency": camera}
-    if "camera_offset" in cam:
-        cam = {"log": LogConventions(camera_offset=cam["camera_offset"])}
     for k in range(4):
-        rec = stabilised_recording(plant, base, SynthConfig(duration=DUR, **cam),
-                                   np.random.default_rng(seed + 100 * k))
+        rec = stabilised_recording(plant, base, SynthConfig(
+            duration=duration, camera_latency=latency, log=log or LogConventions()),
+            np.random.default_rng(seed + 100 * k))
         if rec.meta["ball_rolled"]:
             return rec
     raise AssertionError("the synthetic ball did not keep rolling")
@@ -78,39 +85,117 @@ def test_library_names() -> None:
 
 @pytest.mark.parametrize("name", list(CASES))
 def test_effect_recovered(name: str) -> None:
-    changes, camera, pname, true = CASES[name]
-    s = _diagnose(_rec(changes, camera, 11), max_effects=1)
+    changes, pname, true, nominal = CASES[name]
+    s = _diagnose(_rec(changes, 11), max_effects=1)
     assert s["effects"] and s["effects"][0] == name, (s["effects"], s["ranking"][:3])
     est = next(p["value"] for p in s["parameters"] if p["effect"] == name
                and p["name"] == pname)
-    if name == "camera_latency":
-        est = s["camera_latency"]["fitted_total"]
-    rel = abs(est - true) / abs(true - NOMINAL[pname])
-    if name == "camera_offset":  # both components, as a vector
-        off = np.array(camera["camera_offset"])
-        fit = np.array([s["camera_offset"]["x"], s["camera_offset"]["y"]])
-        rel = float(np.linalg.norm(fit - off) / np.linalg.norm(off))
-    assert rel < 0.25, (name, est, true)
+    assert abs(est - true) / abs(true - nominal) < 0.25, (name, est, true)
     assert max(s["metrics"]["improvement_per_signal"].values()) > 1.5
 
 
-def test_clean_control_no_mismatch() -> None:
-    """Nominal physics: nothing selected, nothing located, and the null's noise scale is the
-    residual's (the noise-injection null is checked, not just the selection)."""
-    s = _diagnose(_rec({}, 0.0, 4242))
-    assert s["effects"] == []
+def test_clean_control_with_a_strange_logger_through_rig_log_text(tmp_path: Path) -> None:
+    """Nominal physics logged by another rig's conventions (a first-order velocity filter of
+    7 ms, the torque 1.5 ms early, 300 lines per second, a camera 12 ms late, offset, scale
+    and rotation, theta printed to 1 mrad), written as rig-log text and read back: nothing
+    found, and the sensor timing measured, not assumed (the NTNU rig's 6.4 ms would make
+    this clean recording look like viscous friction)."""
+    log = LogConventions(velocity_lag=0.007, torque_delay=0.0015, log_rate=300.0,
+                         camera_offset=(2e-3, -3e-3), camera_scale=1.01,
+                         camera_rotation=0.01, theta_turns=40, encoder_counts=0)
+    rec = _rec({}, 4242, log=log, latency=0.012)
+    back = read_rig_log(write_rig_log(tmp_path / "clean.txt", rec), warn=False)
+    s = _diagnose(back, max_effects=2)
+    assert s["effects_selected"] == [], s["verdict"]
     assert s["verdict"] == "no significant mismatch"
-    for row, g in s["located"]["global"].items():
-        assert 0.7 < g["rms_over_noise"] < 1.4, (row, g)
-    assert len(s["located"]["windows"]) <= 1
+    sens = {r["name"]: r["value"] for r in s["sensor_timing"]}
+    # the log times a fix by its first line: latency plus half a line on average
+    assert sens["latency"] == pytest.approx(0.012 + 0.5 / 300.0, abs=1.5e-3)
+    assert sens["torque_delay"] == pytest.approx(0.0015, abs=3e-4)
+    assert sens["scale"] == pytest.approx(1.01, abs=5e-3)
+    lag = s["recordings"][0]["preprocessing"]["velocity_lag"]
+    assert lag["identified"] and 0.003 < lag["lag_s"] < 0.008
 
 
 def test_pair_found_as_two() -> None:
-    rec = _rec({"joint.viscous_friction": 5e-4, "track.rolling_resistance": 1e-2}, 0.0, 77)
+    rec = _rec({"joint.viscous_friction": 5e-4, "track.rolling_resistance": 1e-2}, 77)
     s = _diagnose(rec)
     assert set(s["effects"][:2]) == {"joint_viscous_friction", "rolling_resistance"}
     ci = next(p["ci95"] for p in s["parameters"] if p["name"] == "c_v")
     assert ci[0] < 5e-4 < ci[1] or abs(ci[0] - 5e-4) < 5e-5
+
+
+def test_frame_held_run_ball_rows_alone() -> None:
+    """The frame held, the ball rolling on it and settling: recognised, the ball's rows
+    alone analysed, its rolling resistance found (the NTNU rolling_data run's kind)."""
+    base = RigParams()
+    plant = base.replace(**{"track.rolling_resistance": 1e-2})
+    rec = held_frame_recording(plant, SynthConfig(duration=DUR, camera_rate=165.0,
+                                                  log=LogConventions(theta_turns=48)),
+                               np.random.default_rng(2), theta=-0.01, phi0=0.3)
+    s = _diagnose(rec, max_effects=1)
+    assert s["frame_held"] and s["recordings"][0]["kind"] == "frame held"
+    assert s["recordings"][0]["rows"] == ["ball_row", "ball_distance_row"]
+    assert any("frame was held" in n for n in s["notes"])
+    assert s["effects"] == ["rolling_resistance"], s["effects"]
+    mu = next(p["value"] for p in s["parameters"] if p["name"] == "mu_rol")
+    assert mu == pytest.approx(1e-2, rel=0.25)
+
+
+def test_several_short_runs_used_together(tmp_path: Path) -> None:
+    """A log of six 0.8-s runs (clock restarts) is diagnosed with every run, the friction
+    found from them together."""
+    runs = []
+    for k in range(6):
+        rec = _rec({"joint.coulomb_friction": 3e-3}, 300 + k, duration=0.8)
+        runs.append(rec)
+    path = write_rig_log(tmp_path / "short.txt", runs)
+    from bfr_model.io.rig_log import parse_rig_log  # noqa: PLC0415 - this test only
+
+    log = parse_rig_log(path, warn=False)
+    back = [log.recording(k) for k in range(len(log.runs))]
+    assert len(back) == 6
+    d = diagnose_recording(back, RigParams(), DiagnoseOptions(max_effects=1))
+    s = d.summary
+    assert s["recording"]["runs_used"] == 6
+    assert len(s["recordings"][0]["preprocessing"]["runs"]) == 6
+    assert s["effects"] == ["joint_coulomb_friction"], s["effects"]
+
+
+def test_one_rig_many_recordings() -> None:
+    """Two recordings of one rig with different sensors: one set of physics, each its own
+    sensor timing, the per-recording values beside the joint one, and an interval that
+    includes their spread."""
+    plant = {"joint.coulomb_friction": 2e-3}
+    a = _rec(plant, 21, log=LogConventions(torque_delay=1e-3), latency=0.005)
+    b = _rec(plant, 22, log=LogConventions(torque_delay=-1e-3), latency=0.015)
+    d = diagnose_recordings([("a", [a]), ("b", [b])], RigParams(),
+                            DiagnoseOptions(max_effects=1, block=BLOCK))
+    s = d.summary
+    assert s["effects"] == ["joint_coulomb_friction"]
+    sens = {(r["recording"], r["name"]): r["value"] for r in s["sensor_timing"]}
+    assert sens[("a", "torque_delay")] == pytest.approx(1e-3, abs=3e-4)
+    assert sens[("b", "torque_delay")] == pytest.approx(-1e-3, abs=3e-4)
+    assert sens[("b", "latency")] - sens[("a", "latency")] == pytest.approx(0.01, abs=1.5e-3)
+    per = [r for r in s["between_recordings"]["per_recording"] if r["name"] == "T_c"]
+    assert {r["recording"] for r in per} == {"a", "b"}
+    joint = s["between_recordings"]["joint"][0]
+    assert joint["recordings_used"] == 2
+    assert joint["ci95"][0] <= joint["ci95_joint"][0] and joint["ci95"][1] >= \
+        joint["ci95_joint"][1]
+    assert joint["ci95"][0] < 2e-3 < joint["ci95"][1]
+
+
+def test_contact_model_truth_is_clean() -> None:
+    """The truth is another model structure (a free ball held by a compliant contact,
+    friction-limited rolling): the rigid model's diagnosis invents no effect from the
+    difference."""
+    base = RigParams()
+    rec = contact_recording(base, base, SynthConfig(duration=8.0, phase=0.4),
+                            np.random.default_rng(5))
+    assert rec.meta["ball_rolled"]
+    s = _diagnose(rec)
+    assert s["effects_selected"] == [], s["verdict"]
 
 
 def _env() -> dict[str, str]:
@@ -126,13 +211,13 @@ def _cli(*args: str) -> subprocess.CompletedProcess:
     """``bfr diagnose ARGS`` in a subprocess."""
     return subprocess.run([sys.executable, "-m", "bfr_diagnose.cli", *args],
                           check=False, capture_output=True, text=True, env=_env(),
-                          timeout=300)
+                          timeout=600)
 
 
 def _bfr(*args: str) -> subprocess.CompletedProcess:
     """``bfr ARGS`` (the project's command line) in a subprocess."""
     return subprocess.run([sys.executable, "-m", "bfr_tools.cli", *args], check=False,
-                          capture_output=True, text=True, env=_env(), timeout=300)
+                          capture_output=True, text=True, env=_env(), timeout=600)
 
 
 @pytest.mark.parametrize("content,what", [
@@ -147,7 +232,7 @@ def test_cli_bad_input(tmp_path: Path, content: str, what: str) -> None:
     out = tmp_path / "out"
     r = _cli(str(f), "--out-dir", str(out), "--no-null")
     assert r.returncode == 2, r.stderr
-    assert "error" in r.stderr
+    assert "error" in r.stderr and "Traceback" not in r.stderr
     assert not out.exists()
 
 
@@ -157,17 +242,6 @@ def test_cli_nan_csv(tmp_path: Path) -> None:
                  "0.001,nan,0,0,0,0,0.1,0\n")
     r = _cli(str(f), "--no-null")
     assert r.returncode == 2 and "error" in r.stderr
-
-
-def test_bag_written_by_recorder(tmp_path: Path) -> None:
-    bag = pytest.importorskip("bfr_model.io.bag")
-    rec = _rec({"joint.viscous_friction": 6e-4}, 0.0, 5)
-    path = tmp_path / "run_bag"
-    bag.write_recording_bag(path, rec)
-    back = bag.read_bag(path)
-    assert back.n > 0.9 * rec.n
-    s = _diagnose(back, max_effects=1)
-    assert s["effects"][:1] == ["joint_viscous_friction"]
 
 
 def _record_like_the_recorder(path: Path, rec, latency: float) -> None:  # noqa: ANN001
@@ -214,18 +288,20 @@ def _record_like_the_recorder(path: Path, rec, latency: float) -> None:  # noqa:
 
 
 def test_bag_from_the_recorders_writer(tmp_path: Path) -> None:
-    """A bag as the recorder node writes it (BagWriter + rclpy CDR), diagnosed by the CLI."""
-    rec = _rec({"track.rolling_resistance": 1.2e-2}, 0.004, 21)
-    _record_like_the_recorder(tmp_path / "rec_bag", rec, 0.004)
-    r = _cli(str(tmp_path / "rec_bag"), "--json", "--quiet", "--no-plots", "--max-effects", "2")
+    """A bag as the recorder node writes it (BagWriter + rclpy CDR; fixes stamped at their
+    exposure, 16 ms before they arrive), diagnosed by the CLI: the observations are placed
+    at their header stamps, so no camera latency is left to find, and the effect is."""
+    rec = _rec({"track.rolling_resistance": 1.2e-2}, 21, latency=0.016)
+    _record_like_the_recorder(tmp_path / "rec_bag", rec, 0.016)
+    r = _cli(str(tmp_path / "rec_bag"), "--json", "--quiet", "--no-plots", "--max-effects",
+             "2")
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
-    assert s["has_ball"]
-    assert set(s["effects"][:2]) == {"rolling_resistance", "camera_latency"}, s["effects"]
+    assert s["effects"][:1] == ["rolling_resistance"], s["effects"]
     mu = next(p["value"] for p in s["parameters"] if p["name"] == "mu_rol")
     assert abs(mu - 1.2e-2) < 0.25 * 1.2e-2
-    # the fixes are read at their arrival (log time): the camera's 4 ms are found
-    assert abs(s["camera_latency"]["fitted_total"] - 0.004) < 1e-3
+    lat = next(p["value"] for p in s["sensor_timing"] if p["name"] == "latency")
+    assert abs(lat) < 1.5e-3, lat
 
 
 def test_node_suite_simulation_is_clean(tmp_path: Path) -> None:
@@ -233,53 +309,51 @@ def test_node_suite_simulation_is_clean(tmp_path: Path) -> None:
     own noise-free closed loop must give no mismatch (the processing's resolution is part
     of the null)."""
     out = tmp_path / "sim.mcap"
-    r = _bfr("simulate", "--controller", "--duration", "12", "--out", str(out))
+    r = _bfr("simulate", "--controller", "--duration", "10", "--out", str(out))
     assert r.returncode == 0, r.stderr
     bag = out.with_suffix("")
     assert bag.is_dir()
     r = _cli(str(bag), "--json", "--quiet", "--no-plots")
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
-    assert s["effects"] == [] and s["verdict"] == "no significant mismatch", s["verdict"]
+    assert s["effects_selected"] == [] and s["verdict"] == "no significant mismatch", \
+        s["verdict"]
 
 
-def test_camera_offset_and_ball_mass_found_as_two() -> None:
-    """The real rig's question: a camera offset must not be taken for a lighter ball."""
-    rec = _rec({"ball.mass": 3.3e-3}, {"camera_offset": (4e-3, 3e-3)}, 31)
-    s = _diagnose(rec)
-    assert set(s["effects"][:2]) == {"camera_offset", "ball_mass"}, s["effects"]
-    m = next(p["value"] for p in s["parameters"] if p["name"] == "m_b")
-    assert abs(m - 3.3e-3) < 0.25 * 0.3e-3
-    assert math.hypot(s["camera_offset"]["x"] - 4e-3, s["camera_offset"]["y"] - 3e-3) < 5e-4
-
-
-def test_cli_json_and_outputs(tmp_path: Path) -> None:
-    rec = _rec({"joint.viscous_friction": 6e-4}, 0.0, 6)
+def test_cli_outputs_and_suspects_stay_out_of_the_corrected_parameters(tmp_path: Path
+                                                                      ) -> None:
+    """Outputs written; a fitted value outside its plausibility range (a 30 % heavier ball)
+    is reported as a suspect and never written into corrected_params.yaml."""
+    rec = _rec({"joint.viscous_friction": 6e-4, "ball.mass": 3.9e-3,
+                "ball.inertia": 5.48e-7 * 1.3}, 6)
     f = tmp_path / "run.csv"
     write_csv(f, rec)
     out = tmp_path / "diag"
-    r = _cli(str(f), "--out-dir", str(out), "--json", "--no-null", "--quiet",
-             "--max-effects", "1")
+    r = _cli(str(f), "--out-dir", str(out), "--json", "--quiet", "--max-effects", "2",
+             "--no-plots")
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
-    assert s["effects"] == ["joint_viscous_friction"]
-    for name in ("report.md", "corrected_params.yaml", "residual_time.png", "overlay.png",
-                 "ranking.png", "residual_phi.png", "diagnosis.json", "camera_correction.yaml"):
+    assert "joint_viscous_friction" in s["effects"]
+    assert "ball_mass" in s["effects_selected"] and "ball_mass" in s["suspects"]
+    for name in ("report.md", "corrected_params.yaml", "diagnosis.json", "sensor_model.yaml"):
         assert (out / name).is_file(), name
     fitted = load_params(out / "corrected_params.yaml")
     assert math.isclose(fitted.joint.viscous_friction, 6e-4, rel_tol=0.2)
+    assert fitted.ball.mass == pytest.approx(3e-3)  # the suspect is not applied
+    report = (out / "report.md").read_text()
+    assert "Suspects" in report and "selected at stage" in report
 
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ntnu-rig is absent")
 def test_real_log_step_response_all_runs() -> None:
-    """Six frame-only runs at one constant torque: inertia and viscous friction; the torque
-    gain (and Coulomb friction, a constant like the command) confounded with the inertia."""
-    r = _cli(str(DATA / "step_response_tau_001.txt"), "--run", "all", "--json", "--quiet",
-             "--no-plots")
+    """Six frame-only runs at one constant torque (every run used by default): inertia,
+    confounded with the torque gain; nothing of the ball."""
+    r = _cli(str(DATA / "step_response_tau_001.txt"), "--json", "--quiet", "--no-plots",
+             "--max-effects", "2")
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     assert s["has_ball"] is False and s["recording"]["runs_used"] == 6
-    assert s["effects"][:1] in (["frame_inertia"], ["torque_gain"])
+    assert s["effects_selected"][:1] in (["frame_inertia"], ["torque_gain"])
     assert any({"frame_inertia", "torque_gain"} <= set(c["effects"]) for c in s["confounded"])
     assert all(math.isfinite(p["value"]) for p in s["parameters"])
 
@@ -287,10 +361,33 @@ def test_real_log_step_response_all_runs() -> None:
 @pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ntnu-rig is absent")
 def test_real_log_without_ball_data_says_so() -> None:
     """sin_wave: one camera fix, then 'ball was lost': frame-only analysis, said clearly."""
-    r = _cli(str(DATA / "sin_wave_001_5_ball_center.txt"), "--json", "--quiet", "--no-plots")
+    r = _cli(str(DATA / "sin_wave_001_5_ball_center.txt"), "--json", "--quiet", "--no-plots",
+             "--max-effects", "3")
     assert r.returncode == 0, r.stderr
     s = json.loads(r.stdout)
     assert s["has_ball"] is False
     assert any("no usable ball data" in n and "ball was lost" in n for n in s["notes"])
-    assert set(s["effects"]) <= {"joint_coulomb_friction", "joint_viscous_friction",
-                                 "frame_inertia", "torque_gain"}
+    frame = {"joint_coulomb_friction", "joint_viscous_friction", "frame_inertia",
+             "torque_gain", "torque_offset", "frame_imbalance"}
+    assert set(s["effects_selected"]) <= frame
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ntnu-rig is absent")
+def test_real_friction_runs_both_directions_one_rig() -> None:
+    """The friction runs at +1 and -1 rad/s, diagnosed together: the direction-dependent
+    part of the dry friction is found (the drive's torque offset), one set of physics for
+    both runs: about 2.0 mN m against positive rotation and 3.2 against negative (the
+    issue's figures from the runs one by one, whose intervals excluded one another)."""
+    r = _cli(str(DATA / "friction_v_ref_1.txt"), str(DATA / "friction_v_ref_negative_1.txt"),
+             "--json", "--quiet", "--no-plots", "--max-effects", "2")
+    assert r.returncode == 0, r.stderr
+    s = json.loads(r.stdout)
+    assert sorted(s["effects"]) == ["joint_coulomb_friction", "torque_offset"], s["effects"]
+    val = {p["name"]: p["value"] for p in s["parameters"]}
+    assert 3e-4 < val["tau_0"] < 1.5e-3  # the drive pushes towards positive speed
+    assert 1.7e-3 < val["T_c"] - val["tau_0"] < 2.2e-3
+    assert 2.9e-3 < val["T_c"] + val["tau_0"] < 3.5e-3
+    assert s["recording"]["recordings"] == 2 and s["recording"]["runs_used"] == 2
+    # one speed per run: each run alone cannot split T_c from tau_0, and says so
+    per = s["between_recordings"]["per_recording"]
+    assert per and all(not p["used"] and p["degenerate"] for p in per)

@@ -67,6 +67,28 @@ def test_energy_balance_with_motor_and_losses() -> None:
     assert abs(res.x[-1, 4]) > 1e-4  # the motor did measurable work
 
 
+def test_frame_imbalance_conserves_energy_and_torque_offset_is_motor_work() -> None:
+    """The frame's weight is conservative (T + V with V_f conserved to 1e-8 over 5 s); the
+    drive's offset does work ``tau_0 th'``, booked in W_in: E(t) - E(0) = W_in - W_diss."""
+    p = NOMINAL.replace(**{"frame.imbalance": 5e-3, "frame.imbalance_angle": 1.1})
+    m = RigidModel(p)
+    x = np.array([0.3, 1.2, 0.5, 2.0, 0.0, 0.0])
+    _, xs = solve_adaptive(rigid_rhs, x, (0.0, 5.0), m.rhs_args(0.0),
+                           t_eval=np.linspace(0.0, 5.0, 1001))
+    kin, pot = m.energy(xs)
+    e = kin + pot
+    assert np.max(np.abs(e - e[0])) / abs(e[0]) < 1e-8
+    # V_f = m_f e g cos(theta - theta_e): the potential differs from the balanced frame's
+    _, pot0 = RigidModel(NOMINAL).energy(xs)
+    vf = 5e-3 * NOMINAL.environment.gravity * np.cos(xs[:, 0] - 1.1)
+    np.testing.assert_allclose(pot - pot0, vf, rtol=1e-10, atol=1e-14)
+    q = p.replace(**{"actuator.torque_offset": 2e-3, "joint.coulomb_friction": 1e-3})
+    res = simulate(RigidModel(q), np.array([0.1, 0.2, 1.0, 2.0]), 2.0, 0.0, dt=5e-4)
+    assert res.energy_drift_rel < 1e-6
+    w_in = res.x[:, 4]
+    np.testing.assert_allclose(w_in[-1], 2e-3 * (res.x[-1, 0] - res.x[0, 0]), rtol=1e-3)
+
+
 def test_coin_rotation_law_on_a_circle() -> None:
     """b = 0: a ball rolling once round a held circular frame of radius r spins (r+R)/R turns."""
     p = NOMINAL.replace(**{"frame.contour.b": 0.0, "frame.inertia": 1e6,

@@ -40,7 +40,10 @@ def _derive(params):  # noqa: ANN001, ANN202
     s_dot = sp.sqrt(p.diff(ph).dot(p.diff(ph))) * phd
     omega_b = thd - s_dot / R
     T = sp.Rational(1, 2) * (m * r_dot.dot(r_dot) + jb * omega_b**2 + jf * thd**2)
-    V = m * g * r[1]
+    # the frame's centre of mass at e [sin theta_e, cos theta_e] in frame coordinates
+    me, th_e = params.frame.imbalance, params.frame.imbalance_angle
+    com = rot * sp.Matrix([me * sp.sin(th_e), me * sp.cos(th_e)])
+    V = m * g * r[1] + g * com[1]
     L = T - V
     M = sp.Matrix(2, 2, lambda i, j: sp.diff(L, qd[i], qd[j]))
     rest = sp.Matrix([
@@ -52,7 +55,7 @@ def _derive(params):  # noqa: ANN001, ANN202
     return f
 
 
-@pytest.mark.parametrize("variant", ["nominal", "harmonics_bump"])
+@pytest.mark.parametrize("variant", ["nominal", "harmonics_bump", "imbalance_offset"])
 def test_equations_match_independent_sympy_derivation(variant: str) -> None:
     p = load_params()
     if variant == "harmonics_bump":
@@ -62,8 +65,14 @@ def test_equations_match_independent_sympy_derivation(variant: str) -> None:
                          "track.bump_phi": [0.7], "track.bump_height": [5e-4],
                          "track.bump_width": [0.1],
                          "environment.axis_misalignment": 0.05})
+    if variant == "imbalance_offset":
+        # frame imbalance (a gravity term of the frame) and the drive's gain and offset:
+        # Q_theta = k_u u + tau_0
+        p = p.replace(**{"frame.imbalance": 2e-3, "frame.imbalance_angle": 0.7,
+                         "actuator.torque_offset": 1.5e-3, "actuator.torque_gain": 1.3})
     model = RigidModel(p)
     f = _derive(p)
+    k_u, tau0 = p.actuator.torque_gain, p.actuator.torque_offset
     rng = np.random.default_rng(11)
     for _ in range(25):
         th = rng.uniform(-np.pi, np.pi)
@@ -72,7 +81,8 @@ def test_equations_match_independent_sympy_derivation(variant: str) -> None:
         u = rng.normal(0.0, 0.05)
         M, rest, *_ = f(th, ph, thd, phd)
         qdd_ref = np.linalg.solve(np.array(M, float),
-                                  np.array([u, 0.0]) - np.array(rest, float).ravel())
+                                  np.array([k_u * u + tau0, 0.0])
+                                  - np.array(rest, float).ravel())
         qdd = np.array(model.accelerations([th, ph, thd, phd], u))
         np.testing.assert_allclose(qdd, qdd_ref, rtol=1e-9, atol=1e-9 * np.max(np.abs(qdd_ref)))
         np.testing.assert_allclose(model.mass_matrix(ph), np.array(M, float), rtol=1e-10)

@@ -1,14 +1,15 @@
-"""One call that diagnoses a recording: :func:`diagnose_recording`.
+"""One call that diagnoses the recordings of one rig: :func:`diagnose_recordings`.
 
 Returns a :class:`Diagnosis`: the JSON-ready summary (:meth:`Diagnosis.to_json`, the
 ``--json`` output) plus the objects the report needs. See docs/diagnosis.md for the method.
 
-The steps of :func:`diagnose_recording`, each a function here: preprocessing and the
-residual, the noise-only null (:func:`_null_calibration`), the selection of effects, the
-location of the mismatch, the held-out metrics of each equation row
-(:func:`_heldout_rows`), the same inside the located windows (:func:`_located_rows`), the
-short-horizon predictions (:func:`_predictions`), the plausibility of the fitted values and
-the verdict (:func:`_implausible`, :func:`_verdict`), and the summary dict
+The steps of :func:`diagnose_recordings`, each a function here: the parts (each recording's
+runs cut into pieces, prepared and stitched by kind, :func:`_parts`), the noise-only null of
+each part and the sensor model alone (stage 0, :func:`_calibrate`), the selection of effects
+(one set of physics for all recordings, each with its own sensor model), the suspects (fits
+outside their plausibility range, never written into the corrected parameters), the spread
+between recordings, and per recording the location of the mismatch, the held-out metrics of
+each row and the short-horizon predictions (:func:`_part_result`), then the summary dict
 (:func:`_summary`).
 """
 
@@ -25,16 +26,33 @@ from bfr_model.recording import Recording
 from numpy.typing import NDArray
 
 from bfr_diagnose import DiagnoseError
-from bfr_diagnose.effects import EFFECTS, FRAME_ONLY_EFFECTS, display_values, plausibility
-from bfr_diagnose.identify import Problem, Selection, autocorr_time, select_effects
+from bfr_diagnose.effects import (
+    EFFECTS,
+    FRAME_ONLY_EFFECTS,
+    apply_effects,
+    display_values,
+    plausibility,
+    sensor_correction,
+    sensor_names_for,
+)
+from bfr_diagnose.identify import (
+    Part,
+    Problem,
+    Selection,
+    between_recordings,
+    select_effects,
+)
 from bfr_diagnose.locate import ljung_box, locate, prediction_errors, rms_by_block
-from bfr_diagnose.null import NullCalibration, calibrate_null
-from bfr_diagnose.preprocess import Prepared, PrepConfig, prepare_runs
+from bfr_diagnose.null import NullCalibration, PartNoise, null_gains, part_noise, thresholds_of
+from bfr_diagnose.preprocess import Piece, Prepared, PrepConfig, SensorCorrection, plan_parts
 from bfr_diagnose.residual import Residual, ResidualConfig, ResidualEvaluator
 
-__all__ = ["DiagnoseOptions", "Diagnosis", "diagnose_recording"]
+__all__ = ["DiagnoseOptions", "Diagnosis", "PartResult", "diagnose_recording",
+           "diagnose_recordings"]
 
 Say = Callable[[str], None]  # ``progress(str)``: where progress messages go
+ROW_NAMES = {1: "frame_torque_row", 2: "ball_row", 3: "ball_distance_row"}
+ROW_UNITS = {1: "N m", 2: "N m", 3: "m"}
 
 
 @dataclass(kw_only=True)
@@ -43,20 +61,62 @@ class DiagnoseOptions:
 
     prep: PrepConfig = field(default_factory=PrepConfig)
     residual: ResidualConfig = field(default_factory=ResidualConfig)
-    latency0: float = 0.0               # [s] nominal camera latency
-    max_effects: int = 3
+    latency0: float = 0.0               # [s] starting guess of the camera latency
+    max_effects: int = 6
     only: list[str] | None = None
     null_runs: int = 6                  # noise injections of the null
     null_seed: int = 0
     null: bool = True
     block: float | None = None          # [s] train/test block (default: duration / 8)
-    null_recordings: list[Recording] | None = None  # empirical null instead of injection
-    null_calibration: NullCalibration | None = None  # precomputed (e.g. shared by blindtest)
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class PartResult:
+    """What the report needs of one recording (part) of a diagnosis.
+
+    Attributes
+    ----------
+    name, kind : str
+        Label and kind (``rolling``, ``frame held``, ``frame only``).
+    rows : tuple of int
+        Equation rows analysed.
+    prep : Prepared
+        The preprocessed recording.
+    sensor0, sensor : SensorCorrection
+        The sensor model with the nominal physics (stage 0) and with the corrected physics.
+    res_raw, res_before, res_after : Residual
+        Equation error of the nominal model without and with the sensor model, and of the
+        corrected model.
+    sigma : ndarray
+        Noise of rows 1-3 (the null's).
+    test_mask : ndarray of bool
+        Held-out residual samples.
+    pred_raw, pred_before, pred_after : dict
+        Short-horizon predictions of the same three models (with up to 400 traces).
+    summary : dict
+        Its JSON entry.
+    """
+
+    name: str
+    kind: str
+    rows: tuple[int, ...]
+    prep: Prepared
+    sensor0: SensorCorrection
+    sensor: SensorCorrection
+    res_raw: Residual
+    res_before: Residual
+    res_after: Residual
+    sigma: NDArray[np.float64]
+    test_mask: NDArray[np.bool_]
+    pred_raw: dict[str, Any]
+    pred_before: dict[str, Any]
+    pred_after: dict[str, Any]
+    summary: dict[str, Any]
 
 
 @dataclass(frozen=True, kw_only=True)
 class Diagnosis:
-    """Result of :func:`diagnose_recording`.
+    """Result of :func:`diagnose_recordings`.
 
     Attributes
     ----------
@@ -65,33 +125,29 @@ class Diagnosis:
     wall_time_s : float or None
         Wall time of the diagnosis [s]; a caller that times more (the CLI: reading the
         recording too) records its own with ``dataclasses.replace``.
-    prep, selection, null, res_before, res_after, test_mask, pred_before, pred_after, base
-        What the report needs: the preprocessed recording, the selection, the null, the
-        nominal and corrected residuals, the held-out residual samples, the short-horizon
-        predictions (with traces) and the nominal parameters.
+    selection : Selection
+        The selected effects and every stage's figures.
+    null : NullCalibration
+        The noise-only null.
+    parts : list of PartResult
+        Each recording's residuals, predictions and metrics.
+    base : RigParams
+        Nominal parameters.
+    corrected : RigParams
+        The nominal parameters with the plausible effects (what ``corrected_params.yaml``
+        holds; suspects left out).
     """
 
     findings: dict[str, Any]
     wall_time_s: float | None = None
-    prep: Prepared
     selection: Selection
     null: NullCalibration
-    res_before: Residual
-    res_after: Residual
-    test_mask: NDArray[np.bool_]
-    pred_before: dict[str, Any]
-    pred_after: dict[str, Any]
+    parts: list[PartResult]
     base: RigParams
+    corrected: RigParams
 
     def to_json(self) -> dict[str, Any]:
-        """The JSON-ready summary (the ``--json`` output and ``diagnosis.json``).
-
-        Returns
-        -------
-        dict
-            :attr:`findings` followed by ``wall_time_s`` (a new top-level dict; the nested
-            values are shared).
-        """
+        """The JSON-ready summary (the ``--json`` output and ``diagnosis.json``)."""
         return {**self.findings, "wall_time_s": self.wall_time_s}
 
     @property
@@ -99,21 +155,34 @@ class Diagnosis:
         """The JSON-ready summary, :meth:`to_json` (read-only view for existing callers)."""
         return self.to_json()
 
+    @property
+    def prep(self) -> Prepared:
+        """The first recording's preprocessed data (single-recording callers)."""
+        return self.parts[0].prep
 
-def _f(x: float) -> float | None:
+
+def _f(x: float | None) -> float | None:
     """``x`` as a float, or None when missing or not finite (JSON has no NaN)."""
     return float(x) if x is not None and np.isfinite(x) else None
 
 
 def diagnose_recording(rec: Recording | list[Recording], base: RigParams,
                        opts: DiagnoseOptions | None = None, progress: Any = None) -> Diagnosis:
-    """Locate, name, model and show the mismatch between ``rec`` and ``base``.
+    """Diagnose one recording, or the runs of one log (:func:`diagnose_recordings`)."""
+    runs = list(rec) if isinstance(rec, (list, tuple)) else [rec]
+    name = str(runs[0].meta.get("source") or "recording")
+    return diagnose_recordings([(name, runs)], base, opts, progress)
+
+
+def diagnose_recordings(recordings: list[tuple[str, list[Recording]]], base: RigParams,
+                        opts: DiagnoseOptions | None = None,
+                        progress: Any = None) -> Diagnosis:
+    """Locate, name, model and show the mismatch between a rig's recordings and ``base``.
 
     Parameters
     ----------
-    rec : Recording or list of Recording
-        The recording, or several runs of one rig (diagnosed together: each preprocessed
-        on its own, then stitched with unusable gaps, :func:`~.preprocess.stitch`).
+    recordings : list of (str, list of Recording)
+        Each recording by name with its runs (a log's runs share its sensors).
     base : RigParams
         Nominal parameters.
     opts : DiagnoseOptions, optional
@@ -124,242 +193,147 @@ def diagnose_recording(rec: Recording | list[Recording], base: RigParams,
     Returns
     -------
     Diagnosis
-        The summary (:meth:`Diagnosis.to_json`) and what the report needs.
+        One set of physics for the rig, each recording's sensor model, the spread between
+        recordings, and per recording what the report needs.
 
     Raises
     ------
     DiagnoseError
-        Unusable recording.
+        No usable recording.
     """
     opts = opts or DiagnoseOptions()
     t_start = time.perf_counter()
     say = progress or (lambda _m: None)
-    recs = list(rec) if isinstance(rec, (list, tuple)) else [rec]
-    prep = prepare_runs(recs, opts.prep, latency0=opts.latency0)
-    ev = ResidualEvaluator(prep, opts.residual)
-    if ev.idx.size < 50:
-        raise DiagnoseError("too few usable samples after preprocessing "
-                            f"({ev.idx.size} residual samples)")
-    dur = float(prep.t[-1] - prep.t[0])
-    block = opts.block or float(np.clip(dur / 8.0, 1.5, 5.0))
-    say(f"preprocessed {dur:.1f} s: {prep.info.get('ball')}; {prep.info.get('theta_source')}")
-    prob = Problem(ev, base, block)
-    null = _null_calibration(prep, prob, recs, opts, block, say)
-    sel = select_effects(prob, null.thresholds if opts.null else
-                         {n: 0.05 for n in EFFECTS}, max_effects=opts.max_effects,
-                         only=opts.only, progress=say, weights=tuple(null.sigma))
-    res0 = ev.evaluate(base, 0.0)
-    res1 = ev.evaluate(sel.params, sel.sensor)
-    loc = locate(prep, res0, tuple(null.sigma), max(null.tau, 1.0), msq=null.msq)
-    rows = ["frame_torque_row"] + (["ball_row"] if prep.has_ball else [])
-    before, after = _heldout_rows(rows, res0, res1, null.sigma, prob.test,
-                                  _whiteness_lag(opts))
-    located = _located_rows(rows, prep.t[res0.idx], res0, res1, loc["windows"], prob.test)
-    pred_b, pred_a = _predictions(prep, base, sel, res0, res1, block, say)
-    implausible = _implausible(sel, base, opts.latency0)
-    findings = _summary(
-        recs=recs, prep=prep, opts=opts, sel=sel, null=null, block=block,
-        implausible=implausible, loc=loc,
-        metrics=_metrics(rows, before, after, located, pred_b, pred_a))
-    return Diagnosis(findings=findings, wall_time_s=time.perf_counter() - t_start, prep=prep,
-                     selection=sel, null=null, res_before=res0, res_after=res1,
-                     test_mask=prob.test, pred_before=pred_b, pred_after=pred_a, base=base)
+    parts, pieces, notes = _parts(recordings, opts, say)
+    prob = Problem(parts, base)
+    noises, sensors0, null = _calibrate(prob, pieces, opts, say)
+    sel = select_effects(prob, null.thresholds, sensors0, null.tau,
+                         max_effects=opts.max_effects, only=opts.only, progress=say)
+    suspects = _suspects(sel, base)
+    corrected, _ = apply_effects(base, [(EFFECTS[n], v) for n, v in
+                                        zip(sel.final.effects, sel.final.values, strict=True)
+                                        if n not in suspects])
+    between = between_recordings(prob, sel) if len(parts) > 1 else {"per_recording": [],
+                                                                     "joint": []}
+    say("held-out metrics and short-horizon predictions per recording")
+    results = [_part_result(prob, i, sel, sensors0, noises[i], opts) for i in range(len(parts))]
+    findings = _summary(recordings=recordings, results=results, opts=opts, sel=sel,
+                        null=null, suspects=suspects, between=between, notes=notes,
+                        base=base)
+    return Diagnosis(findings=findings, wall_time_s=time.perf_counter() - t_start,
+                     selection=sel, null=null, parts=results, base=base, corrected=corrected)
 
 
-# -- the null -------------------------------------------------------------------------------------
+# -- parts -----------------------------------------------------------------------------------
 
 
-def _null_calibration(prep: Prepared, prob: Problem, recs: list[Recording],
-                      opts: DiagnoseOptions, block: float, say: Say) -> NullCalibration:
-    """The noise-only null of the recording (:func:`~.null.calibrate_null`).
+def _parts(recordings: list[tuple[str, list[Recording]]], opts: DiagnoseOptions, say: Say
+           ) -> tuple[list[Part], list[list[Piece]], list[str]]:
+    """Every recording's runs, cut, prepared and stitched by kind, as problem parts."""
+    parts: list[Part] = []
+    pieces: list[list[Piece]] = []
+    notes: list[str] = []
+    for name, runs in recordings:
+        try:
+            plan, why = plan_parts(runs, opts.prep, opts.latency0)
+        except DiagnoseError as exc:
+            if len(recordings) == 1:
+                raise
+            notes.append(f"{name}: not used: {exc}")
+            continue
+        notes += [f"{name}: {w}" for w in why]
+        for kind, pcs, prep in plan:
+            ev = ResidualEvaluator(prep, opts.residual)
+            if ev.idx.size < 50:
+                notes.append(f"{name} ({kind}): too few usable samples ({ev.idx.size}); "
+                             "not used")
+                continue
+            dur = float(np.sum(prep.ball_ok if prep.has_ball else prep.frame_ok)
+                        * (prep.t[1] - prep.t[0]))
+            block = opts.block or float(np.clip(dur / 8.0, 1.0, 5.0))
+            label = name if len(plan) == 1 else f"{name} [{kind}]"
+            parts.append(Part.of(label, ev, block,
+                                 sensor_names_for(prep.has_ball, prep.frame_held)))
+            pieces.append(pcs)
+            say(f"{label}: {kind}, {dur:.1f} s usable; {prep.info.get('ball')}; "
+                f"{prep.info.get('theta_source')}")
+    if not parts:
+        raise DiagnoseError("too few usable samples after preprocessing: "
+                            + ("; ".join(notes) or "nothing usable"))
+    return parts, pieces, notes
 
-    Precomputed when ``opts.null_calibration`` is given; with ``opts.null`` off (``--no-null``)
-    only the weights, from the robust scales of the nominal residual, and no thresholds.
-    """
-    base = prob.base
-    if opts.null and opts.null_calibration is not None:
-        return opts.null_calibration
+
+def _calibrate(prob: Problem, pieces: list[list[Piece]], opts: DiagnoseOptions, say: Say
+               ) -> tuple[list[PartNoise], list[np.ndarray], NullCalibration]:
+    """The null of every part, the sensor model alone (stage 0), and the null's thresholds."""
+    rng = np.random.default_rng(opts.null_seed)
+    noises = [part_noise(p, pcs, prob.base, opts.prep, opts.residual,
+                         runs=opts.null_runs if opts.null else 2, rng=rng)
+              for p, pcs in zip(prob.parts, pieces, strict=True)]
+    prob.set_weights([n.sigma for n in noises])
+    for p, n in zip(prob.parts, noises, strict=True):
+        say(f"null of {p.name}: {len(n.draws)} noise injections (camera "
+            f"{n.levels['camera'] * 1e3:.3f} mm, theta {n.levels['theta']:.2g} rad, "
+            f"theta_dot {n.levels['theta_dot']:.2g} rad/s): row noise "
+            + ", ".join(f"{ROW_NAMES[r]} {n.sigma[r - 1]:.3g} {ROW_UNITS[r]}" for r in p.rows))
+    say("stage 0: each recording's sensor model with the nominal physics")
+    sensors0 = prob.fit([], None, None, prob.sensor_start(), max_nfev=60).sensors
+    for _ in range(2):  # weights from the residual level, then the sensors again
+        prob.reweight([], sensors0)
+        sensors0 = prob.fit([], None, None, sensors0, max_nfev=40).sensors
+    prob.reweight([], sensors0)
     if opts.null:
-        return calibrate_null(prep, base, opts.prep, opts.residual, block,
-                              runs=opts.null_runs, seed=opts.null_seed, rec=recs,
-                              null_recordings=opts.null_recordings, progress=say,
-                              problem=prob)
-    prob0 = Problem(prob.ev, base, block)
-    prob0.set_weights([])
-    w = prob0.weighted([])
-    return NullCalibration(sigma=list(prob0.s), gains={}, thresholds={},
-                           tau=autocorr_time(w[0]), runs=0, noise=dict(prep.noise),
-                           source="none (--no-null): weights from the nominal residual")
+        gains = null_gains(prob, noises, sensors0)
+        thresholds = thresholds_of(gains)
+    else:
+        gains, thresholds = {}, dict.fromkeys(EFFECTS, 0.05)
+    null = NullCalibration(
+        sigma=[n.sigma.tolist() for n in noises], gains=gains, thresholds=thresholds,
+        tau=max(n.tau for n in noises), runs=min(len(n.draws) for n in noises),
+        noise=[n.levels for n in noises],
+        source=(f"{min(len(n.draws) for n in noises)} noise injections into each recording "
+                "itself (its own camera, encoder and velocity noise, through the same "
+                "preprocessing), plus twice the residual's change with the filter widths "
+                "(x1.4), the processing's own resolution"
+                + ("" if opts.null else "; thresholds not computed (--no-null): 5 % gain")),
+        rms_null=[[_rms(n.msq[r]) for r in range(3)] for n in noises],
+        msq=[n.msq for n in noises])
+    return noises, sensors0, null
 
 
-# -- held-out metrics -----------------------------------------------------------------------------
+def _rms(msq: np.ndarray) -> float | None:
+    """Root of the mean of the finite entries (None when there are none)."""
+    x = msq[np.isfinite(msq)]
+    return float(np.sqrt(np.mean(x))) if x.size else None
 
 
-def _whiteness_lag(opts: DiagnoseOptions) -> int:
-    """Residual samples per kernel width (near-independent samples for the Ljung-Box test)."""
-    return max(round(2 * opts.residual.half_width / (opts.prep.dt * opts.residual.stride)), 1)
+# -- plausibility, verdict, notes -------------------------------------------------------------
 
 
-def _row_pairs(rows: list[str], res0: Residual, res1: Residual
-               ) -> list[tuple[str, NDArray[np.float64], NDArray[np.float64]]]:
-    """``(row name, nominal residual, corrected residual)`` of each analysed row."""
-    return list(zip(rows, (res0.r1, res0.r2), (res1.r1, res1.r2), strict=False))
-
-
-def _heldout_rows(rows: list[str], res0: Residual, res1: Residual, sigma: list[float],
-                  test: NDArray[np.bool_], lag: int
-                  ) -> tuple[dict[str, dict[str, Any]], dict[str, dict[str, Any]]]:
-    """Held-out RMSE, RMSE over the row's noise and whiteness, nominal and corrected.
-
-    Parameters
-    ----------
-    rows : list of str
-        Names of the analysed rows (``frame_torque_row``, and ``ball_row`` with a ball).
-    res0, res1 : Residual
-        Equation error of the nominal and of the corrected model.
-    sigma : list of float
-        Noise scale of each row [N m] (the null's).
-    test : ndarray of bool
-        Held-out residual samples.
-    lag : int
-        Sampling step of the Ljung-Box test (:func:`_whiteness_lag`).
-
-    Returns
-    -------
-    before, after : dict
-        Per row: ``rmse`` [N m], ``rmse_over_noise``, ``whiteness``.
-    """
-    before: dict[str, dict[str, Any]] = {}
-    after: dict[str, dict[str, Any]] = {}
-    for i, (name, r0, r1) in enumerate(_row_pairs(rows, res0, res1)):
-        s = sigma[i]
-        before[name] = {"rmse": rms_by_block(r0, test),
-                        "rmse_over_noise": rms_by_block(r0, test) / s}
-        after[name] = {"rmse": rms_by_block(r1, test),
-                       "rmse_over_noise": rms_by_block(r1, test) / s}
-        before[name]["whiteness"] = ljung_box(r0[test], lag)
-        after[name]["whiteness"] = ljung_box(r1[test], lag)
-    return before, after
-
-
-def _located_rows(rows: list[str], t_res: NDArray[np.float64], res0: Residual,
-                  res1: Residual, windows: list[dict[str, Any]], test: NDArray[np.bool_]
-                  ) -> dict[str, dict[str, float] | None]:
-    """Held-out RMSE before and after inside the windows where each row exceeded the noise.
-
-    A local effect (e.g. a bump) acts only there; a row needs 5 such held-out samples.
-
-    Parameters
-    ----------
-    rows : list of str
-        Names of the analysed rows.
-    t_res : ndarray
-        Times of the residual samples [s].
-    res0, res1 : Residual
-        Equation error of the nominal and of the corrected model.
-    windows : list of dict
-        Flagged windows of :func:`~.locate.locate` (``t0``, ``t1``, ``signals``).
-    test : ndarray of bool
-        Held-out residual samples.
-
-    Returns
-    -------
-    dict
-        Per row: ``rmse_before``, ``rmse_after``, ``improvement``, ``fraction_of_heldout``;
-        or None.
-    """
-    located: dict[str, dict[str, float] | None] = {}
-    for name, r0, r1 in _row_pairs(rows, res0, res1):
-        m = np.zeros(t_res.size, bool)
-        for win in windows:
-            if name in win.get("signals", []):
-                m |= (t_res >= win["t0"]) & (t_res < win["t1"])
-        m &= test
-        if m.sum() >= 5:
-            b, a = rms_by_block(r0, m), rms_by_block(r1, m)
-            located[name] = {"rmse_before": b, "rmse_after": a,
-                             "improvement": b / max(a, 1e-300),
-                             "fraction_of_heldout": float(m.sum() / max(test.sum(), 1))}
-        else:
-            located[name] = None
-    return located
-
-
-def _predictions(prep: Prepared, base: RigParams, sel: Selection, res0: Residual,
-                 res1: Residual, block: float, say: Say
-                 ) -> tuple[dict[str, Any], dict[str, Any]]:
-    """Short-horizon open-loop predictions, nominal and corrected, on the held-out blocks.
-
-    Returns
-    -------
-    before, after : dict
-        :func:`~.locate.prediction_errors` of each model (with up to 400 traces).
-    """
-    t_grid = prep.t - prep.t[0]
-    test_t = (np.floor(t_grid / block).astype(int) % 2) == 1
-    say("short-horizon prediction before/after on the held-out blocks")
-    pred_b = prediction_errors(prep, base, res0.phi, res0.phi_dot, 0.0, test_t,
-                               keep_traces=400)
-    pred_a = prediction_errors(prep, sel.params, res1.phi, res1.phi_dot, sel.sensor,
-                               test_t, keep_traces=400)
-    return pred_b, pred_a
-
-
-def _metrics(rows: list[str], before: dict[str, dict[str, Any]],
-             after: dict[str, dict[str, Any]], located: dict[str, dict[str, float] | None],
-             pred_b: dict[str, Any], pred_a: dict[str, Any]) -> dict[str, Any]:
-    """The ``metrics`` entry of the summary: held-out fit before and after, every measure."""
-    comb_b = float(np.sqrt(np.mean([before[r]["rmse_over_noise"] ** 2 for r in rows])))
-    comb_a = float(np.sqrt(np.mean([after[r]["rmse_over_noise"] ** 2 for r in rows])))
-    return {
-        "heldout_before": before, "heldout_after": after,
-        "heldout_rmse_over_noise": {"before": comb_b, "after": comb_a,
-                                    "improvement_factor": comb_b / max(comb_a, 1e-12)},
-        "improvement_per_signal": {r: before[r]["rmse"] / max(after[r]["rmse"], 1e-300)
-                                   for r in rows},
-        "located_windows": located,
-        "prediction_before": {k: v for k, v in pred_b.items() if k != "traces"},
-        "prediction_after": {k: v for k, v in pred_a.items() if k != "traces"},
-    }
-
-
-# -- plausibility, verdict, notes -----------------------------------------------------------------
-
-
-def _implausible(sel: Selection, base: RigParams, latency0: float) -> dict[str, str]:
+def _suspects(sel: Selection, base: RigParams) -> dict[str, str]:
     """Why each fitted effect is physically implausible, by name (the plausible are absent).
 
     Also marks each row of ``sel.parameters`` with ``plausible``.
     """
-    implausible = {}
+    out = {}
     for name, vals in zip(sel.final.effects, sel.final.values, strict=True):
-        why = plausibility(name, display_values(EFFECTS[name], vals), base, latency0)
+        why = plausibility(name, display_values(EFFECTS[name], vals), base)
         if why:
-            implausible[name] = why
+            out[name] = why
     for p in sel.parameters:
-        p["plausible"] = p["effect"] not in implausible
-    return implausible
+        p["plausible"] = p["effect"] not in out
+    return out
 
 
-def _verdict(chosen: list[str], implausible: dict[str, str], significant_loc: bool) -> str:
-    """One sentence: what the nominal model leaves out, or that nothing significant is.
-
-    Parameters
-    ----------
-    chosen : list of str
-        Selected effects, in the order of selection.
-    implausible : dict
-        Selected effects fitted at physically implausible values (:func:`_implausible`).
-    significant_loc : bool
-        Whether some row's nominal residual exceeds the noise over the whole recording.
-    """
-    good = [n for n in chosen if n not in implausible]
-    bad = [n for n in chosen if n in implausible]
+def _verdict(chosen: list[str], suspects: dict[str, str], significant_loc: bool) -> str:
+    """One sentence: what the nominal model leaves out, or that nothing significant is."""
+    good = [n for n in chosen if n not in suspects]
+    bad = [n for n in chosen if n in suspects]
     if good:
         return ("mismatch found: the nominal model leaves out " + ", ".join(good)
                 + (f"; {', '.join(bad)} also improve(s) the fit but at a physically "
-                   "implausible value (a stand-in for something outside the library)"
-                   if bad else ""))
+                   "implausible value (a suspect: a stand-in for something outside the "
+                   "library, not written into corrected_params.yaml)" if bad else ""))
     if bad:
         return ("mismatch found, but the effects that reduce it (" + ", ".join(bad)
                 + ") take physically implausible values: the missing physics is most "
@@ -370,90 +344,193 @@ def _verdict(chosen: list[str], implausible: dict[str, str], significant_loc: bo
     return "no significant mismatch"
 
 
-def _notes(implausible: dict[str, str], prep: Prepared, recs: list[Recording]) -> list[str]:
-    """Notes for the reader: implausible fits, a frame-only analysis, stitched runs."""
-    notes = [f"{name} is physically implausible ({why})." for name, why in implausible.items()]
-    if not prep.has_ball:
-        lost = [f"'{e[1]}' at t = {e[0]:.2f} s" for r in recs for e in r.meta.get("events", [])
-                if isinstance(e, (list, tuple)) and len(e) == 2 and "lost" in str(e[1])]
-        notes.append(
-            f"{prep.info.get('ball')}" + (f" (the log reports {', '.join(lost)})" if lost
-                                          else "") + ". Only the frame's torque row is "
-            "analysed: the ball effects (" + ", ".join(
-                n for n in EFFECTS if n not in FRAME_ONLY_EFFECTS) + ") cannot be assessed, "
-            "and frame inertia, torque gain and friction are identifiable only as ratios "
-            "to one another (J_f/k_u, T_c/k_u, c_v/k_u).")
-    if len(recs) > 1:
-        notes.append(f"{len(recs)} runs diagnosed together (each preprocessed alone, placed "
-                     "back to back with unusable gaps); times refer to the stitched axis.")
-    return notes
+def _notes(suspects: dict[str, str], results: list[PartResult],
+           recordings: list[tuple[str, list[Recording]]], notes: list[str]) -> list[str]:
+    """Notes for the reader: suspects, frame-only and frame-held parts, dropped data."""
+    out = [f"{name} is a suspect: physically implausible ({why}); reported, not written "
+           "into corrected_params.yaml." for name, why in suspects.items()]
+    runs = {name: r for name, r in recordings}
+    for pr in results:
+        if pr.kind == "frame only":
+            src = runs.get(pr.name.split(" [")[0], [])
+            lost = [f"'{e[1]}' at t = {e[0]:.2f} s" for r in src for e in
+                    r.meta.get("events", [])
+                    if isinstance(e, (list, tuple)) and len(e) == 2 and "lost" in str(e[1])]
+            out.append(
+                f"{pr.name}: {pr.prep.info.get('ball')}" + (
+                    f" (the log reports {', '.join(lost)})" if lost else "")
+                + ". Only the frame's torque row is analysed: the ball effects cannot be "
+                "assessed from it, and frame inertia, torque gain, friction, offset and "
+                "imbalance are identifiable only as ratios to one another.")
+        elif pr.kind == "frame held":
+            out.append(f"{pr.name}: the frame was held (theta did not change): the ball's "
+                       "rows alone are analysed (contour, rolling radius, the ball's inertia, "
+                       "rolling resistance; nothing of the frame's drive).")
+        n_runs = len(pr.prep.info.get("runs", [])) or 1
+        if n_runs > 1:
+            out.append(f"{pr.name}: {n_runs} runs or pieces diagnosed together (each "
+                       "preprocessed alone, placed back to back with unusable gaps).")
+    return out + notes
 
 
-def _ranked(sel: Selection) -> list[dict[str, Any]]:
-    """The first stage's ranking, selected effects first (in order of selection)."""
-    chosen = list(sel.chosen)
-    ranked = [{**r, "selected": r["effect"] in chosen} for r in sel.ranking]
-    ranked.sort(key=lambda r: (not r["selected"], chosen.index(r["effect"])
-                               if r["selected"] else 0, -r["heldout_gain"]))
-    return ranked
+def _bound_notes(sel: Selection) -> list[str]:
+    """A note for every sensor value that ran to its bound (not identified there)."""
+    return [f"{r['recording']}: the sensor model's {r['name']} ({r['description']}) ran to its "
+            f"bound {r['at_bound']:g} {r['unit']}: not identified by this recording (either "
+            "the recording does not show it, e.g. a timing at constant speed, or it stands in "
+            "for something the model lacks; then read the physics fitted beside it with "
+            "care)." for r in sel.sensor_table if r.get("at_bound") is not None]
 
 
-# -- the summary ----------------------------------------------------------------------------------
+# -- per recording ---------------------------------------------------------------------------
 
 
-def _summary(*, recs: list[Recording], prep: Prepared, opts: DiagnoseOptions, sel: Selection,
-             null: NullCalibration, block: float, implausible: dict[str, str],
-             loc: dict[str, Any], metrics: dict[str, Any]) -> dict[str, Any]:
-    """The JSON-ready summary of a diagnosis, without the wall time (docs/diagnosis.md).
+def _whiteness_lag(ev: ResidualEvaluator, opts: DiagnoseOptions) -> int:
+    """Residual samples per kernel width (near-independent samples for the Ljung-Box test)."""
+    return max(round(2 * ev.half_width / (opts.prep.dt * opts.residual.stride)), 1)
 
-    Parameters
-    ----------
-    recs : list of Recording
-        The runs diagnosed (the first names the source).
-    prep : Prepared
-        The preprocessed (stitched) recording.
-    opts : DiagnoseOptions
-        Settings.
-    sel : Selection
-        The selected effects.
-    null : NullCalibration
-        The noise-only null.
-    block : float
-        Train/test block length [s].
-    implausible : dict
-        Implausible fitted effects (:func:`_implausible`).
-    loc : dict
-        Where the nominal residual exceeds the noise (:func:`~.locate.locate`).
-    metrics : dict
-        Held-out fit before and after (:func:`_metrics`).
-    """
-    rec = recs[0]
-    significant_loc = any(v["significant"] for v in loc["global"].values())
+
+def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarray],
+                 noise: PartNoise, opts: DiagnoseOptions) -> PartResult:
+    """Residuals, location, held-out metrics and predictions of one recording."""
+    part = prob.parts[i]
+    ev = part.ev
+    prep = ev.prep
+    s0 = sensor_correction(part.sensor_names, sensors0[i])
+    s1 = sel.sensors[i]
+    res_raw = ev.evaluate(prob.base, SensorCorrection())
+    res0 = ev.evaluate(prob.base, s0)
+    res1 = ev.evaluate(sel.params, s1)
+    tau = max(noise.tau, 1.0)
+    loc = locate(prep, res0, part.sigma, tau, msq=noise.msq, rows=part.rows)
+    lag = _whiteness_lag(ev, opts)
+    before, after, located = {}, {}, {}
+    t_res = prep.t[res0.idx]
+    for r in part.rows:
+        name = ROW_NAMES[r]
+        r0, r1 = res0.rows[r - 1], res1.rows[r - 1]
+        s = part.sigma[r - 1]
+        before[name] = {"rmse": rms_by_block(r0, part.test), "unit": ROW_UNITS[r],
+                        "rmse_over_noise": rms_by_block(r0, part.test) / s,
+                        "whiteness": ljung_box(r0[part.test], lag)}
+        after[name] = {"rmse": rms_by_block(r1, part.test), "unit": ROW_UNITS[r],
+                       "rmse_over_noise": rms_by_block(r1, part.test) / s,
+                       "whiteness": ljung_box(r1[part.test], lag)}
+        located[name] = _located(name, t_res, r0, r1, loc["windows"], part.test)
+    # the held-out blocks on the grid (prediction windows start inside them)
+    test_t = np.interp(np.arange(prep.n), res0.idx, part.test.astype(float)) > 0.5
+    pred_raw = prediction_errors(prep, prob.base, res_raw.phi, res_raw.phi_dot,
+                                 SensorCorrection(), test_t, keep_traces=400)
+    pred_b = prediction_errors(prep, prob.base, res0.phi, res0.phi_dot, s0, test_t,
+                               keep_traces=400)
+    pred_a = prediction_errors(prep, sel.params, res1.phi, res1.phi_dot, s1, test_t,
+                               keep_traces=400)
+    metrics = _metrics(part, before, after, located, pred_raw, pred_b, pred_a)
+    summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],
+               "duration": float(prep.t[-1] - prep.t[0]),
+               "usable_s": float(np.sum(ev.rows_mask) * opts.prep.dt),
+               "kernel_half_width_s": ev.half_width,
+               "preprocessing": {**{k: v for k, v in prep.info.items()},
+                                 "noise": {k: _f(v) for k, v in prep.noise.items()}},
+               "sensor_model_nominal_physics": asdict(s0), "sensor_model": asdict(s1),
+               "located": loc, "metrics": metrics}
+    return PartResult(name=part.name, kind=part.kind, rows=part.rows, prep=prep, sensor0=s0,
+                      sensor=s1, res_raw=res_raw, res_before=res0, res_after=res1,
+                      sigma=part.sigma, test_mask=part.test, pred_raw=pred_raw,
+                      pred_before=pred_b, pred_after=pred_a, summary=summary)
+
+
+def _located(name: str, t_res: np.ndarray, r0: np.ndarray, r1: np.ndarray,
+             windows: list[dict[str, Any]], test: NDArray[np.bool_]) -> dict[str, float] | None:
+    """Held-out RMSE before and after inside the windows where the row exceeded the noise."""
+    m = np.zeros(t_res.size, bool)
+    for win in windows:
+        if name in win.get("signals", []):
+            m |= (t_res >= win["t0"]) & (t_res < win["t1"])
+    m &= test
+    if m.sum() < 5:
+        return None
+    b, a = rms_by_block(r0, m), rms_by_block(r1, m)
+    return {"rmse_before": b, "rmse_after": a, "improvement": b / max(a, 1e-300),
+            "fraction_of_heldout": float(m.sum() / max(test.sum(), 1))}
+
+
+def _metrics(part: Part, before: dict[str, Any], after: dict[str, Any],
+             located: dict[str, Any], pred_raw: dict[str, Any], pred_b: dict[str, Any],
+             pred_a: dict[str, Any]) -> dict[str, Any]:
+    """Held-out fit before and after, every measure, of one recording."""
+    rows = list(before)
+    comb_b = float(np.sqrt(np.mean([before[r]["rmse_over_noise"] ** 2 for r in rows])))
+    comb_a = float(np.sqrt(np.mean([after[r]["rmse_over_noise"] ** 2 for r in rows])))
+
+    def ratio(a: float | None, b: float | None) -> float | None:
+        return _f(a / b) if a is not None and b is not None and b > 0 else None
+
+    pr = {k: v for k, v in pred_raw["rmse"].items()}
+    pb = {k: v for k, v in pred_b["rmse"].items()}
+    pa = {k: v for k, v in pred_a["rmse"].items()}
     return {
-        "source": rec.meta.get("source"),
-        "source_kind": rec.meta.get("source_kind"),
-        "duration": float(prep.t[-1] - prep.t[0]),
-        "has_ball": prep.has_ball,
-        "verdict": _verdict(sel.chosen, implausible, significant_loc),
-        "notes": _notes(implausible, prep, recs),
-        "effects": sel.chosen,
-        "implausible": implausible,
+        "heldout_before": before, "heldout_after": after,
+        "heldout_rmse_over_noise": {"before": comb_b, "after": comb_a,
+                                    "improvement_factor": comb_b / max(comb_a, 1e-12)},
+        "improvement_per_signal": {r: before[r]["rmse"] / max(after[r]["rmse"], 1e-300)
+                                   for r in rows},
+        "located_windows": located,
+        "prediction_raw": {k: v for k, v in pred_raw.items() if k != "traces"},
+        "prediction_before": {k: v for k, v in pred_b.items() if k != "traces"},
+        "prediction_after": {k: v for k, v in pred_a.items() if k != "traces"},
+        "prediction_improvement": {k: ratio(pb.get(k), pa.get(k)) for k in pa},
+        "prediction_improvement_vs_raw": {k: ratio(pr.get(k), pa.get(k)) for k in pa},
+    }
+
+
+# -- the summary -----------------------------------------------------------------------------
+
+
+def _summary(*, recordings: list[tuple[str, list[Recording]]], results: list[PartResult],
+             opts: DiagnoseOptions, sel: Selection, null: NullCalibration,
+             suspects: dict[str, str], between: dict[str, Any], notes: list[str],
+             base: RigParams) -> dict[str, Any]:
+    """The JSON-ready summary of a diagnosis, without the wall time (docs/diagnosis.md)."""
+    first = results[0]
+    rec0 = recordings[0][1][0]
+    significant_loc = any(v["significant"] for pr in results
+                          for v in pr.summary["located"]["global"].values())
+    s0 = first.sensor
+    return {
+        "source": rec0.meta.get("source") if len(recordings) == 1 else
+        [name for name, _ in recordings],
+        "source_kind": rec0.meta.get("source_kind"),
+        "duration": float(sum(pr.summary["duration"] for pr in results)),
+        "has_ball": any(pr.prep.has_ball for pr in results),
+        "frame_held": any(pr.kind == "frame held" for pr in results),
+        "verdict": _verdict(sel.chosen, suspects, significant_loc),
+        "notes": _notes(suspects, results, recordings, notes) + _bound_notes(sel),
+        "effects": [n for n in sel.chosen if n not in suspects],
+        "effects_selected": sel.chosen,
+        "suspects": suspects,
         "parameters": sel.parameters,
+        "sensor_timing": sel.sensor_table,
+        "between_recordings": between,
         "camera_latency": {"nominal": opts.latency0,
-                           "fitted_total": opts.latency0 + sel.sensor.latency,
-                           "fitted": "camera_latency" in sel.chosen},
-        "camera_offset": {"x": sel.sensor.offset_x, "y": sel.sensor.offset_y,
-                          "fitted": "camera_offset" in sel.chosen,
-                          "meaning": "the camera reports (x, y) = true + (x, y) offset [m]"},
-        "ranking": _ranked(sel),
+                           "fitted_total": opts.latency0 + s0.latency,
+                           "meaning": "age of a fix when it arrives [s] (first recording)"},
+        "camera_offset": {"x": s0.offset_x, "y": s0.offset_y,
+                          "meaning": "the camera reports (x, y) = scale Rot(rotation) true + "
+                                     "offset [m] (first recording)"},
+        "ranking": sel.ranking,
         "stages": sel.stages,
         "confounded": sel.confounded,
-        "located": loc,
-        "metrics": metrics,
-        "null": {k: v for k, v in null.to_json().items() if k != "gains"},
-        "preprocessing": {**prep.info, "noise": {k: _f(v) for k, v in prep.noise.items()},
-                          "config": asdict(opts.prep), "residual": asdict(opts.residual),
-                          "block_s": block},
-        "recording": {**rec.summary(), "runs_used": len(recs),
-                      "duration_used": float(sum(r.duration for r in recs))},
+        "located": first.summary["located"],
+        "metrics": first.summary["metrics"],
+        "recordings": [pr.summary for pr in results],
+        "null": null.to_json(),
+        "options": {"prep": asdict(opts.prep), "residual": asdict(opts.residual),
+                    "latency0": opts.latency0, "max_effects": opts.max_effects},
+        "recording": {**rec0.summary(), "recordings": len(recordings),
+                      "runs_used": sum(len(r) for _, r in recordings),
+                      "duration_used": float(sum(r.duration for _, rs in recordings
+                                                 for r in rs))},
+        "frame_only_effects": list(FRAME_ONLY_EFFECTS),
+        "plausible_effect_count": len([n for n in sel.chosen if n not in suspects]),
     }

@@ -1,39 +1,46 @@
-"""Fit, rank and select effects; confidence intervals; confounded and degenerate fits.
+"""Fit, rank and select effects on one or several recordings of one rig; intervals.
 
-Cost. The weighted equation error ``e = [r1 / s1, r2 / s2]`` (rows of
-:mod:`~bfr_diagnose.residual`, ``s_i`` the RMS noise of each row from the noise-only
-null, :mod:`~bfr_diagnose.null`) on time blocks: alternating blocks of ``block`` seconds
-are training and held-out data. Fits are bounded nonlinear least squares on the training
-blocks (``scipy.optimize.least_squares``, trust-region reflective).
+Problem. One rig, any number of recordings (:class:`Part`: one recording, or the runs of one
+log of one kind): the physics (the library's effects, :mod:`~bfr_diagnose.effects`) is
+shared, each part keeps its own sensor model (camera latency, offset, rotation and scale,
+the encoder's zero, the torque's timing: :data:`~bfr_diagnose.effects.SENSOR_PARAMS`),
+fitted on every candidate together with the physics and never selected.
+
+Cost. The weighted equation error of every part: its rows (frame torque, ball, ball's
+distance; :mod:`~bfr_diagnose.residual`) each divided by its RMS noise from the noise-only
+null (:mod:`~bfr_diagnose.null`). The ball row is divided by the candidate's ball mass over
+the nominal one: that row is homogeneous in the ball's mass and inertia, so a lighter ball
+would otherwise shrink any misfit of it (a trivial solution). Alternating time blocks of
+``block`` seconds of each part are training and held-out data. Fits are bounded nonlinear
+least squares on the training blocks (``scipy.optimize.least_squares``, trust-region
+reflective) with a Jacobian that evaluates only the parts a column touches.
 
 Statistics. ``gain = 1 - C_test(fit) / C_test(current)``, the held-out cost reduction; and
 ``dBIC = N_eff ln(C_train(fit) / C_train(current)) + k ln(N_eff)`` with
-``N_eff = N / tau`` (``tau`` the integrated autocorrelation time of the nominal residual,
-since the filtered residual is correlated). An effect is significant when its held-out gain
-exceeds the null's largest gain for that effect (x1.25 + 0.02), ``dBIC < -6`` (strong
-evidence), its joint fit is not degenerate, and it is larger than its engineering
-resolution (:data:`~bfr_diagnose.effects.MIN_SIZE`: a 20-um bump, a 0.1-mm camera
-offset, a 0.2 % inertia change, ...; a noise-free simulation must not produce micrometre
-"bumps").
+``N_eff = N / tau`` (``tau`` the integrated autocorrelation time of the residual). An effect
+is significant when its held-out gain exceeds the null's largest gain for that effect
+(x1.25 + 0.02), ``dBIC < -6``, its joint fit is not degenerate, and it is larger than its
+engineering resolution (:data:`~bfr_diagnose.effects.MIN_SIZE`).
 
-Selection, greedy forward. At each stage every candidate gets one Gauss-Newton step on
-top of the effects chosen so far (the linearised screening; at the first stage the
-Jacobians are those the null already computed); the three best and any within half of its
-threshold are then fitted fully, jointly with the chosen effects (all refitted, so an
-effect can show its worth once the others move with it). The best significant one is
-added; it stops when nothing is significant or after ``max_effects``. So two effects
-present are found as two.
+Selection, greedy forward. Stage 0 fits the sensor model alone. At each stage every
+candidate gets one Gauss-Newton step on top of the chosen effects with the sensor model
+refitted with it (the linearised screening: the least-squares fit of the candidate's and
+the sensors' Jacobian columns together); the three best and any within half of its
+threshold are then fitted fully, jointly with the chosen effects and the sensors. The best
+significant one is added; it stops when nothing is significant or after ``max_effects``.
+Every stage's figures are kept, so the ranking shows at which stage each effect was selected
+and what decided it.
 
 Degenerate fits. A joint fit in which a parameter runs to a bound that its nominal value is
-not at (e.g. the frame inertia to its floor while the Coulomb friction grows to the constant
-command: the equation error's trivial solution), or in which two parameters of different
-effects correlate beyond 0.995, is not identifiable from this recording: never added,
-reported. Confounded pairs: when the runner-up explains nearly as much as the winner and
-their joint fit correlates beyond 0.9 (or adds nothing), the pair is reported instead of
-guessed.
+not at, or in which two parameters of different effects correlate beyond 0.995, is not
+identifiable from these recordings: never added, reported. Confounded pairs: a runner-up
+that explains nearly as much as the winner and correlates beyond 0.9 with it (or adds
+nothing), and any physics parameter correlating beyond 0.9 with a sensor parameter (e.g.
+the contour's radius with the camera's scale), are reported instead of guessed.
 
-Intervals. ``cov = s^2 (J^T J)^-1 tau`` at the optimum (``s^2`` the residual variance per
-sample, ``tau`` the autocorrelation inflation), 95 % intervals ``+- 1.96 sqrt(diag)``.
+Intervals. ``cov = s^2 (J^T J)^-1 tau`` at the optimum, 95 % intervals ``+- 1.96 sqrt(diag)``.
+With several recordings, :func:`between_recordings` fits every selected effect on each
+recording alone and widens the joint interval by the spread between them.
 """
 
 from __future__ import annotations
@@ -50,20 +57,24 @@ from scipy.optimize import OptimizeWarning, least_squares
 
 from bfr_diagnose.effects import (
     EFFECTS,
-    FRAME_ONLY_EFFECTS,
     MIN_SIZE,
     Effect,
     apply_effects,
     display_values,
     effect_size,
+    plausibility,
+    sensor_correction,
+    sensor_param,
 )
 from bfr_diagnose.preprocess import SensorCorrection
 from bfr_diagnose.residual import ResidualEvaluator
 
-__all__ = ["Fit", "Problem", "Selection", "autocorr_time", "select_effects"]
+__all__ = ["Fit", "LinearScreen", "Part", "Problem", "Selection", "autocorr_time",
+           "between_recordings", "linear_gain", "select_effects"]
 
 FloatArray = NDArray[np.float64]
 Chosen = list[tuple[Effect, FloatArray]]
+_BAD = (ParameterError, ValueError, ZeroDivisionError, FloatingPointError)
 
 
 def autocorr_time(x: FloatArray, max_lag: int = 60) -> float:
@@ -85,12 +96,103 @@ def autocorr_time(x: FloatArray, max_lag: int = 60) -> float:
     return float(min(tau, max_lag))
 
 
+@dataclass(kw_only=True, eq=False)
+class Part:
+    """One recording (or the runs of one log of one kind) in an identification problem.
+
+    Attributes
+    ----------
+    name : str
+        Label (the file, and the kind when a log holds several kinds).
+    ev : ResidualEvaluator
+        Its equation-error evaluator.
+    rows : tuple of int
+        Equation rows it contributes (1: frame, 2: ball, 3: ball's distance).
+    sensor_names : tuple of str
+        Its sensor model's parameters (:func:`~bfr_diagnose.effects.sensor_names_for`).
+    sigma : ndarray
+        The weights' scale of rows 1-3 [N m, N m, m]: the larger of the row's noise (the
+        null's) and its current residual level (:meth:`Problem.reweight`); 1 for unused rows.
+    sigma_null : ndarray
+        RMS noise of rows 1-3 (the null's).
+    train, test : ndarray of bool
+        Training and held-out residual samples (alternating blocks).
+    kind : str
+        ``rolling``, ``frame held`` or ``frame only``.
+    """
+
+    name: str
+    ev: ResidualEvaluator
+    rows: tuple[int, ...]
+    sensor_names: tuple[str, ...]
+    sigma: FloatArray
+    train: NDArray[np.bool_]
+    test: NDArray[np.bool_]
+    kind: str
+    sigma_null: FloatArray | None = None
+
+    @classmethod
+    def of(cls, name: str, ev: ResidualEvaluator, block: float,
+           sensor_names: tuple[str, ...]) -> Part:
+        """A part with alternating train/test blocks of ``block`` seconds, unit weights."""
+        prep = ev.prep
+        t = prep.t[ev.idx]
+        blk = np.floor((t - t[0]) / block).astype(int)
+        train = blk % 2 == 0
+        if not prep.has_ball:
+            rows, kind = (1,), "frame only"
+        elif prep.frame_held:
+            rows, kind = (2, 3), "frame held"
+        else:
+            rows, kind = (1, 2, 3), "rolling"
+        return cls(name=name, ev=ev, rows=rows, sensor_names=sensor_names,
+                   sigma=np.ones(3), train=train, test=~train, kind=kind)
+
+    @property
+    def n(self) -> int:
+        """Residual samples per row."""
+        return int(self.ev.idx.size)
+
+    def affected_by(self, eff: Effect) -> bool:
+        """Whether the effect enters one of this part's rows."""
+        return any(r in self.rows for r in eff.rows)
+
+    def weighted(self, params: RigParams, sensor: SensorCorrection, m_ref: float
+                 ) -> FloatArray:
+        """The part's weighted rows, shape ``(len(rows), n)`` (module docstring: cost)."""
+        res = self.ev.evaluate(params, sensor)
+        out = []
+        for r in self.rows:
+            row = res.rows[r - 1] / self.sigma[r - 1]
+            if r == 2:
+                row = row * (m_ref / params.ball.mass)
+            out.append(row)
+        return np.vstack(out)
+
+
 @dataclass
 class Fit:
-    """One fitted candidate (the chosen effects plus possibly one new one)."""
+    """One fitted candidate: the chosen effects (plus possibly one new one) and the sensors.
+
+    Attributes
+    ----------
+    effects, values : list
+        Effect names and their fitted values (natural units, internal form).
+    sensors : list of ndarray
+        Each part's sensor parameters (natural units, in the part's ``sensor_names`` order).
+    cost_train, cost_test : float
+        Weighted costs.
+    cov : ndarray or None
+        Covariance of all fitted parameters, effects first then sensors (natural units).
+    n_params : int
+        Effect parameters fitted (without the sensors).
+    ok : bool
+        The fit evaluated everywhere.
+    """
 
     effects: list[str]
     values: list[FloatArray]
+    sensors: list[FloatArray]
     cost_train: float
     cost_test: float
     cov: FloatArray | None = None
@@ -111,152 +213,164 @@ class Selection:
     stages: list[dict[str, Any]]
     ranking: list[dict[str, Any]]
     confounded: list[dict[str, Any]]
-    weights: tuple[float, float]
     tau: float
     params: RigParams
-    sensor: SensorCorrection
+    sensors: list[SensorCorrection]
     parameters: list[dict[str, Any]] = field(default_factory=list)
+    sensor_table: list[dict[str, Any]] = field(default_factory=list)
+
+    @property
+    def sensor(self) -> SensorCorrection:
+        """The first part's sensor correction (single-recording callers)."""
+        return self.sensors[0]
 
 
 class Problem:
-    """The identification problem of one prepared recording.
+    """The identification problem of one rig's recordings (module docstring).
 
     Parameters
     ----------
-    evaluator : ResidualEvaluator
-        Equation-error evaluator.
+    parts : list of Part
+        The recordings.
     base : RigParams
         Nominal parameters.
-    block : float
-        Length of the alternating train/test blocks [s].
     """
 
-    def __init__(self, evaluator: ResidualEvaluator, base: RigParams, block: float) -> None:
-        self.ev = evaluator
+    def __init__(self, parts: list[Part], base: RigParams) -> None:
+        self.parts = parts
         self.base = base
-        t = evaluator.prep.t[evaluator.idx]
-        blk = np.floor((t - t[0]) / block).astype(int)
-        self.train = blk % 2 == 0
-        self.test = ~self.train
-        self.has_ball = evaluator.prep.has_ball
-        self.s = (1.0, 1.0)
+        self.m_ref = base.ball.mass
         self.n_eval = 0
         self._jac_cache: dict[tuple, Any] = {}
+        self._set_masks()
+
+    def _set_masks(self) -> None:
+        tr, te = [], []
+        for p in self.parts:
+            tr.append(np.tile(p.train, len(p.rows)))
+            te.append(np.tile(p.test, len(p.rows)))
+        self.train = np.concatenate(tr)
+        self.test = np.concatenate(te)
+        sizes = [p.n * len(p.rows) for p in self.parts]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+
+    # -- shapes and parameters -----------------------------------------------------------
+    @property
+    def has_ball(self) -> bool:
+        """Whether some part has the ball rows."""
+        return any(2 in p.rows for p in self.parts)
 
     @property
     def candidates(self) -> list[str]:
-        """Effects that apply to this recording."""
-        return list(EFFECTS) if self.has_ball else list(FRAME_ONLY_EFFECTS)
+        """Effects that enter some part's rows."""
+        return [n for n, e in EFFECTS.items() if any(p.affected_by(e) for p in self.parts)]
 
-    def rows(self, chosen: Chosen) -> tuple[FloatArray, FloatArray]:
-        """Unweighted rows (r1, r2) [N m] of the base with the chosen effects applied."""
-        params, sensor = apply_effects(self.base, chosen)
-        self.n_eval += 1
-        res = self.ev.evaluate(params, sensor)
-        return res.r1, res.r2
+    def sensor_start(self) -> list[FloatArray]:
+        """Each part's sensor parameters at their defaults (no correction)."""
+        default = SensorCorrection()
+        return [np.array([float(getattr(default, n)) for n in p.sensor_names])
+                for p in self.parts]
 
-    def weighted(self, chosen: Chosen) -> FloatArray:
-        """Weighted residual over all kept samples, shape (rows, n)."""
-        r1, r2 = self.rows(chosen)
-        if self.has_ball:
-            return np.vstack([r1 / self.s[0], r2 / self.s[1]])
-        return (r1 / self.s[0])[None, :]
+    def set_weights(self, sigmas: list[FloatArray]) -> None:
+        """Set each part's row noise (the null's); the weights start at it."""
+        for p, s in zip(self.parts, sigmas, strict=True):
+            p.sigma_null = np.asarray(s, float)
+            p.sigma = p.sigma_null.copy()
+        self._jac_cache.clear()
 
-    def set_weights(self, chosen: Chosen) -> None:
-        """Robust scales of the rows of ``chosen`` on the training blocks."""
-        r1, r2 = self.rows(chosen)
+    def reweight(self, chosen: Chosen, sensors: list[FloatArray]) -> None:
+        """Weights from the current residual level of each row (feasible weighted LS).
 
-        def scale(r: FloatArray) -> float:
-            r = r[self.train]
-            r = r[np.isfinite(r)]
-            return float(max(1.4826 * np.median(np.abs(r - np.median(r))), 1e-12))
-
-        self.s = (scale(r1), scale(r2) if self.has_ball else 1.0)
-
-    def cost(self, chosen: Chosen) -> tuple[float, float, FloatArray]:
-        """(train cost, test cost, weighted residual)."""
-        w = self.weighted(chosen)
-        return float(np.sum(w[:, self.train] ** 2)), float(np.sum(w[:, self.test] ** 2)), w
-
-    def fit(self, fixed: Chosen, new: Effect | None, start: FloatArray | None = None,
-            max_nfev: int = 60, frozen: Chosen | None = None) -> Fit:
-        """Fit the fixed effects (refitted) plus ``new`` jointly on the training blocks.
-
-        ``frozen`` effects are applied first with their values held (not fitted).
+        A row's weight scale becomes the larger of its noise and the robust RMS of its
+        current residual on the training blocks: a row the model misses by 100 times its
+        noise (model error, not noise) does not outweigh the others by a factor 10^4, which
+        on real recordings let one row's model error drive every fit (the camera's ball
+        distance, which a detector's bias misses by millimetres, pulled the sensor model and
+        the contour to their bounds). On data the model fits, the weights stay the noise's.
+        Jacobians cached under earlier weights are dropped.
         """
-        frozen = list(frozen or [])
-        effs = [e for e, _ in fixed] + ([new] if new is not None else [])
-        starts = [np.asarray(v, float) for _, v in fixed]
-        if new is not None:
-            starts.append(np.asarray(start if start is not None else new.start(self.base),
-                                     float))
-        scales = np.concatenate([np.asarray(e.scales) for e in effs])
-        lo = np.concatenate([np.asarray(e.lower) for e in effs])
-        hi = np.concatenate([np.asarray(e.upper) for e in effs])
-        x0n = np.clip(np.concatenate(starts), lo + 0.5 * scales, hi - 0.5 * scales)
-        sizes = [e.k for e in effs]
-        cuts = np.cumsum(sizes)[:-1]
+        for i, p in enumerate(self.parts):
+            if p.sigma_null is None:
+                continue
+            w = self.part_weighted(i, chosen, sensors[i]).reshape(len(p.rows), p.n)
+            for j, r in enumerate(p.rows):
+                x = w[j][p.train] * p.sigma[r - 1]
+                x = x[np.isfinite(x)]
+                if x.size < 10:
+                    continue
+                level = 1.4826 * float(np.median(np.abs(x)))
+                p.sigma[r - 1] = max(float(p.sigma_null[r - 1]), level)
+        self._jac_cache.clear()
 
-        def unpack(xn: FloatArray) -> Chosen:
-            vals = np.split(x0n + xn * scales, cuts)
-            return frozen + list(zip(effs, vals, strict=True))
+    # -- evaluation ----------------------------------------------------------------------
+    def part_weighted(self, i: int, chosen: Chosen, sensor: FloatArray) -> FloatArray:
+        """Part ``i``'s weighted rows, raveled."""
+        p = self.parts[i]
+        params, extra = apply_effects(self.base, chosen)
+        corr = sensor_correction(p.sensor_names, sensor) + extra
+        self.n_eval += 1
+        return p.weighted(params, corr, self.m_ref).ravel()
 
-        n_rows = 2 if self.has_ball else 1
-        bad_len = n_rows * int(self.train.sum())
+    def weighted(self, chosen: Chosen, sensors: list[FloatArray]) -> FloatArray:
+        """All parts' weighted rows, concatenated (the cost's residual vector)."""
+        return np.concatenate([self.part_weighted(i, chosen, s)
+                               for i, s in enumerate(sensors)])
 
-        def fun(xn: FloatArray) -> FloatArray:
-            try:
-                w = self.weighted(unpack(xn))
-            except (ParameterError, ValueError, ZeroDivisionError):
-                return np.full(bad_len, 1e3)
-            out = w[:, self.train].ravel()
-            if not np.all(np.isfinite(out)):
-                return np.full(bad_len, 1e3)
-            return out
+    def cost(self, chosen: Chosen, sensors: list[FloatArray]) -> tuple[float, float, FloatArray]:
+        """(train cost, test cost, weighted residual vector)."""
+        w = self.weighted(chosen, sensors)
+        return (float(np.nansum(w[self.train] ** 2)), float(np.nansum(w[self.test] ** 2)), w)
 
-        lb = (lo - x0n) / scales
-        ub = (hi - x0n) / scales
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", OptimizeWarning)
-            warnings.simplefilter("ignore", RuntimeWarning)
-            sol = least_squares(fun, np.zeros(x0n.size), bounds=(lb, ub), method="trf",
-                                diff_step=1e-2, max_nfev=max_nfev, x_scale=1.0)
-        chosen = unpack(sol.x)
-        try:
-            c_tr, c_te, _ = self.cost(chosen)
-            ok = math.isfinite(c_tr) and math.isfinite(c_te)
-        except (ParameterError, ValueError):
-            c_tr = c_te = math.inf
-            ok = False
-        cov = None
-        try:
-            jac = sol.jac
-            n = jac.shape[0]
-            s2 = 2.0 * sol.cost / max(n - x0n.size, 1)
-            jtj = jac.T @ jac
-            cov_n = np.linalg.pinv(jtj) * s2
-            cov = cov_n * np.outer(scales, scales)
-        except (np.linalg.LinAlgError, ValueError):
-            cov = None
-        return Fit(effects=[e.name for e, _ in chosen], values=[v for _, v in chosen],
-                   cost_train=c_tr, cost_test=c_te, cov=cov, n_params=int(x0n.size), ok=ok)
+    def part_slice(self, i: int) -> slice:
+        """Where part ``i`` sits in the residual vector."""
+        return slice(int(self.offsets[i]), int(self.offsets[i + 1]))
 
-    def _key(self, chosen: Chosen, what: str) -> tuple | None:
-        """Cache key of a Jacobian: only for the nominal model (nothing chosen)."""
-        return None if chosen else (what, self.s)
+    def rows_of(self, w: FloatArray) -> list[dict[int, FloatArray]]:
+        """Split a residual vector into each part's rows ``{row: samples}``."""
+        out = []
+        for i, p in enumerate(self.parts):
+            seg = w[self.part_slice(i)].reshape(len(p.rows), p.n)
+            out.append({r: seg[j] for j, r in enumerate(p.rows)})
+        return out
 
-    def jacobian(self, chosen: Chosen, eff: Effect, x0: FloatArray,
-                 w0: FloatArray) -> FloatArray:
+    # -- Jacobians -----------------------------------------------------------------------
+    def sensor_jacobian(self, chosen: Chosen, sensors: list[FloatArray], w0: FloatArray,
+                        key: Any = None) -> FloatArray:
+        """Columns of every part's sensor parameters (zero outside the part).
+
+        Forward differences of one ``scale`` each (cached under ``key``).
+        """
+        if key is not None and ("sensors", key) in self._jac_cache:
+            return self._jac_cache[("sensors", key)]
+        cols = []
+        for i, p in enumerate(self.parts):
+            sl = self.part_slice(i)
+            for j, name in enumerate(p.sensor_names):
+                sp = sensor_param(name)
+                h = sp.scale if sensors[i][j] + sp.scale <= sp.upper else -sp.scale
+                x = np.array(sensors[i], float)
+                x[j] += h
+                col = np.zeros_like(w0)
+                try:
+                    col[sl] = (self.part_weighted(i, chosen, x) - w0[sl]) / h
+                except _BAD:
+                    pass
+                cols.append(col)
+        D = np.stack(cols, axis=1) if cols else np.zeros((w0.size, 0))
+        D[~np.isfinite(D)] = 0.0
+        if key is not None:
+            self._jac_cache[("sensors", key)] = D
+        return D
+
+    def effect_jacobian(self, chosen: Chosen, sensors: list[FloatArray], eff: Effect,
+                        x0: FloatArray, w0: FloatArray, key: Any = None) -> FloatArray:
         """Weighted residual Jacobian of ``eff`` at ``x0`` on top of ``chosen``.
 
         Forward differences of one ``scale`` per parameter (towards the inside of the
-        bounds); shape ``(rows * n, k)``, rows stacked as in :meth:`weighted`. ``w0`` is the
-        raveled weighted residual of ``chosen`` (with ``eff`` at ``x0``, i.e. its start).
-        Cached for the nominal model (the null computes the same columns).
+        bounds), evaluating only the parts the effect enters; cached under ``key``.
         """
-        key = self._key(chosen, eff.name)
-        if key is not None and key in self._jac_cache:
-            return self._jac_cache[key]
+        if key is not None and (eff.name, key) in self._jac_cache:
+            return self._jac_cache[(eff.name, key)]
         cols = []
         for j in range(eff.k):
             h = float(eff.scales[j])
@@ -264,159 +378,207 @@ class Problem:
                 h = -h
             x = np.array(x0, float)
             x[j] += h
-            try:
-                w = self.weighted([*chosen, (eff, x)]).ravel()
-                cols.append((w - w0) / h)
-            except (ParameterError, ValueError, ZeroDivisionError):
-                cols.append(np.zeros_like(w0))
+            col = np.zeros_like(w0)
+            for i, p in enumerate(self.parts):
+                if not p.affected_by(eff):
+                    continue
+                sl = self.part_slice(i)
+                try:
+                    col[sl] = (self.part_weighted(i, [*chosen, (eff, x)], sensors[i])
+                               - w0[sl]) / h
+                except _BAD:
+                    col[sl] = 0.0
+            cols.append(col)
         D = np.stack(cols, axis=1)
         D[~np.isfinite(D)] = 0.0
         if key is not None:
-            self._jac_cache[key] = D
+            self._jac_cache[(eff.name, key)] = D
         return D
 
-    def bump_columns(self, chosen: Chosen, n_grid: int = 48, width: float = 0.1,
-                     dh: float = 1e-4) -> list[tuple[float, FloatArray]]:
-        """Residual response to a unit bump height at each grid position (cached if nominal).
-
-        ``(phi_c, column)`` pairs: the weighted residual change per metre of a Gaussian bump
-        of the given width at ``phi_c`` (the residual is close to linear in the height).
-        """
-        key = self._key(chosen, "track_bumps/grid")
-        if key is not None and key in self._jac_cache:
-            return self._jac_cache[key]
+    def bump_columns(self, chosen: Chosen, sensors: list[FloatArray], w0: FloatArray,
+                     n_grid: int = 48, width: float = 0.1, dh: float = 1e-4, key: Any = None
+                     ) -> list[tuple[float, FloatArray]]:
+        """Residual response to a unit bump height at each grid position (cached by key)."""
+        if key is not None and ("bumps", key) in self._jac_cache:
+            return self._jac_cache[("bumps", key)]
         eff = EFFECTS["track_bumps"]
-        w0 = self.weighted(chosen).ravel()
         out = []
         for phi_c in np.linspace(0.0, 2.0 * np.pi, n_grid, endpoint=False):
+            col = np.zeros_like(w0)
             try:
-                w1 = self.weighted([*chosen, (eff, np.array([phi_c, dh, width]))]).ravel()
-            except (ParameterError, ValueError):
+                for i, p in enumerate(self.parts):
+                    if p.affected_by(eff):
+                        sl = self.part_slice(i)
+                        col[sl] = (self.part_weighted(
+                            i, [*chosen, (eff, np.array([phi_c, dh, width]))], sensors[i])
+                            - w0[sl]) / dh
+            except _BAD:
                 continue
-            col = (w1 - w0) / dh
             col[~np.isfinite(col)] = 0.0
             out.append((float(phi_c), col))
         if key is not None:
-            self._jac_cache[key] = out
+            self._jac_cache[("bumps", key)] = out
         return out
 
-    def rows_mask(self, which: NDArray[np.bool_]) -> NDArray[np.bool_]:
-        """The per-sample mask ``which`` (train/test) tiled over the rows of :meth:`weighted`."""
-        return np.tile(which, 2 if self.has_ball else 1)
+    # -- fitting -------------------------------------------------------------------------
+    def fit(self, fixed: Chosen, new: Effect | None, start: FloatArray | None,
+            sensors0: list[FloatArray], max_nfev: int = 40, only_part: int | None = None
+            ) -> Fit:
+        """Fit the fixed effects (refitted), ``new`` and every part's sensors jointly.
 
-    def bump_start(self, fixed: Chosen, n_grid: int = 48, width: float = 0.1,
-                   e: FloatArray | None = None) -> FloatArray:
-        """Starting bump (phi_b, h, w): best single-bump position on a grid (linear in h).
-
-        ``e`` is the raveled weighted residual to explain (default: that of ``fixed``).
+        Parameters
+        ----------
+        fixed : list
+            Effects already chosen, with their current values (refitted).
+        new : Effect or None
+            The candidate added (None: refit ``fixed`` and the sensors).
+        start : ndarray or None
+            The candidate's starting values (default: its nominal).
+        sensors0 : list of ndarray
+            Each part's starting sensor values.
+        max_nfev : int
+            Largest number of cost evaluations of the optimiser.
+        only_part : int, optional
+            Fit on this part alone (the others' sensors are kept, their rows unused).
         """
-        tr = self.rows_mask(self.train)
-        w0 = (self.weighted(fixed).ravel() if e is None else e)[tr]
-        best = (-1.0, 0.0, 0.0)
-        for phi_c, col in self.bump_columns(fixed, n_grid, width):
-            d = col[tr]
-            dd = float(np.dot(d, d))
-            if dd <= 0:
-                continue
-            gain = float(np.dot(w0, d)) ** 2 / dd
-            if gain > best[0]:
-                best = (gain, phi_c, -float(np.dot(w0, d)) / dd)
-        h = float(np.clip(best[2], -1e-3, 1e-3))
-        return np.array([best[1], h, width])
+        effs = [e for e, _ in fixed] + ([new] if new is not None else [])
+        starts = [np.asarray(v, float) for _, v in fixed]
+        if new is not None:
+            starts.append(np.asarray(start if start is not None else new.start(self.base),
+                                     float))
+        parts = list(range(len(self.parts))) if only_part is None else [only_part]
+        snames = [(i, n) for i in parts for n in self.parts[i].sensor_names]
+        x0e = np.concatenate(starts) if starts else np.zeros(0)
+        x0s = np.array([sensors0[i][self.parts[i].sensor_names.index(n)] for i, n in snames])
+        lo = np.concatenate([np.asarray(e.lower, float) for e in effs]
+                            + [np.array([sensor_param(n).lower for _, n in snames])])
+        hi = np.concatenate([np.asarray(e.upper, float) for e in effs]
+                            + [np.array([sensor_param(n).upper for _, n in snames])])
+        scales = np.concatenate([np.asarray(e.scales, float) for e in effs]
+                                + [np.array([sensor_param(n).scale for _, n in snames])])
+        x0 = np.clip(np.concatenate([x0e, x0s]), lo + 0.5 * scales, hi - 0.5 * scales)
+        ke = x0e.size
+        cuts = np.cumsum([e.k for e in effs])[:-1] if effs else []
+        ub = (hi - x0) / scales
+        fitter = _Fitter(self, effs, cuts, snames, sensors0, parts, x0, scales, ke, ub)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", OptimizeWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            sol = least_squares(fitter.fun, np.zeros(x0.size), jac=fitter.jac,
+                                bounds=((lo - x0) / scales, ub), method="trf",
+                                max_nfev=max_nfev, x_scale=1.0, ftol=1e-7, xtol=1e-7)
+        chosen, sensors = fitter.unpack(sol.x)
+        try:
+            c_tr, c_te, _ = self.cost(chosen, sensors) if only_part is None else \
+                self._part_cost(only_part, chosen, sensors)
+            ok = math.isfinite(c_tr) and math.isfinite(c_te)
+        except _BAD:
+            c_tr = c_te = math.inf
+            ok = False
+        cov = None
+        jac = sol.jac
+        n = jac.shape[0]
+        s2 = 2.0 * sol.cost / max(n - x0.size, 1)
+        try:
+            cov = np.linalg.pinv(jac.T @ jac) * s2 * np.outer(scales, scales)
+        except (np.linalg.LinAlgError, ValueError):
+            cov = None
+        return Fit(effects=[e.name for e, _ in chosen], values=[v for _, v in chosen],
+                   sensors=sensors, cost_train=c_tr, cost_test=c_te, cov=cov, n_params=ke,
+                   ok=ok)
 
-    def linear_fit(self, chosen: Chosen, eff: Effect, w: FloatArray
-                   ) -> tuple[FloatArray, float, float]:
-        """One Gauss-Newton step for ``eff`` on top of ``chosen`` (the linearised fit).
+    def _part_cost(self, i: int, chosen: Chosen, sensors: list[FloatArray]
+                   ) -> tuple[float, float, FloatArray]:
+        w = self.part_weighted(i, chosen, sensors[i])
+        sl = self.part_slice(i)
+        return (float(np.nansum(w[self.train[sl]] ** 2)),
+                float(np.nansum(w[self.test[sl]] ** 2)), w)
 
-        Returns the parameter values (bounded), and the training and held-out costs of the
-        linearised residual ``w + D b``. ``w`` is the raveled weighted residual of ``chosen``.
-        """
-        tr = self.rows_mask(self.train)
-        te = self.rows_mask(self.test)
-        if eff.name == "track_bumps":
-            x0 = self.bump_start(chosen, e=w)
-            cols = dict(self.bump_columns(chosen))
-            D = cols.get(x0[0], np.zeros_like(w))[:, None]
-            b = np.array([x0[1]])
-            vals = x0
-        else:
-            x0 = np.asarray(eff.start(self.base), float)
-            D = self.jacobian(chosen, eff, x0, w)
-            A = D[tr]
-            if not np.any(A):
-                b = np.zeros(eff.k)
+
+class _Fitter:
+    """The residual and its part-wise Jacobian of one joint fit (:meth:`Problem.fit`)."""
+
+    def __init__(self, prob: Problem, effs: list[Effect], cuts: Any,
+                 snames: list[tuple[int, str]], sensors0: list[FloatArray], parts: list[int],
+                 x0: FloatArray, scales: FloatArray, ke: int, ub: FloatArray) -> None:
+        self.prob, self.effs, self.cuts, self.snames = prob, effs, cuts, snames
+        self.sensors0, self.parts, self.x0, self.scales, self.ke = (sensors0, parts, x0,
+                                                                    scales, ke)
+        self.ub = ub
+        self.mask = np.concatenate([prob.train[prob.part_slice(i)] for i in parts])
+        self.size = int(self.mask.sum())
+        self._last: tuple[FloatArray, list[FloatArray]] | None = None
+
+    def unpack(self, xn: FloatArray) -> tuple[Chosen, list[FloatArray]]:
+        x = self.x0 + xn * self.scales
+        vals = np.split(x[:self.ke], self.cuts) if self.effs else []
+        sensors = [np.array(s, float) for s in self.sensors0]
+        for (i, name), v in zip(self.snames, x[self.ke:], strict=True):
+            sensors[i][self.prob.parts[i].sensor_names.index(name)] = v
+        return list(zip(self.effs, vals, strict=True)), sensors
+
+    def _parts(self, chosen: Chosen, sensors: list[FloatArray],
+               which: list[int]) -> list[FloatArray]:
+        return [self.prob.part_weighted(i, chosen, sensors[i]) for i in which]
+
+    def fun(self, xn: FloatArray) -> FloatArray:
+        try:
+            chosen, sensors = self.unpack(xn)
+            ws = self._parts(chosen, sensors, self.parts)
+        except _BAD:
+            self._last = None
+            return np.full(self.size, 1e3)
+        w = np.concatenate(ws)[self.mask]
+        if not np.all(np.isfinite(w)):
+            w = np.where(np.isfinite(w), w, 0.0)
+        self._last = (np.array(xn), ws)
+        return w
+
+    def jac(self, xn: FloatArray) -> FloatArray:
+        if self._last is None or not np.array_equal(self._last[0], xn):
+            self.fun(xn)
+        if self._last is None:
+            return np.zeros((self.size, xn.size))
+        base = self._last[1]
+        lens = [b.size for b in base]
+        offs = np.concatenate([[0], np.cumsum(lens)]).astype(int)
+        J = np.zeros((int(offs[-1]), xn.size))
+        for col in range(xn.size):
+            step = 1e-2 if xn[col] + 1e-2 <= self.ub[col] else -1e-2
+            x = np.array(xn)
+            x[col] += step
+            ch, se = self.unpack(x)
+            if col < self.ke:
+                eff = self._effect_of(col)
+                which = [k for k, i in enumerate(self.parts)
+                         if self.prob.parts[i].affected_by(eff)]
             else:
-                b = np.linalg.lstsq(A, -w[tr], rcond=None)[0]
-            vals = np.clip(x0 + b, np.asarray(eff.lower, float), np.asarray(eff.upper, float))
-            b = vals - x0
-        c_tr = float(np.sum((w[tr] + D[tr] @ b) ** 2))
-        c_te = float(np.sum((w[te] + D[te] @ b) ** 2))
-        return vals, c_tr, c_te
+                part = self.snames[col - self.ke][0]
+                which = [self.parts.index(part)]
+            for k in which:
+                try:
+                    w = self.prob.part_weighted(self.parts[k], ch, se[self.parts[k]])
+                except _BAD:
+                    continue
+                J[offs[k]:offs[k + 1], col] = (w - base[k]) / step
+        J[~np.isfinite(J)] = 0.0
+        return J[self.mask]
+
+    def _effect_of(self, col: int) -> Effect:
+        edges = np.concatenate([[0], np.cumsum([e.k for e in self.effs])])
+        return self.effs[int(np.searchsorted(edges, col, side="right") - 1)]
 
 
-def _stats(prob: Problem, cur: tuple[float, float], fit: Fit, n_eff: float,
-           k_new: int) -> tuple[float, float]:
+# -- selection -------------------------------------------------------------------------------
+
+
+def _stats(cur: tuple[float, float], fit: Fit, n_eff: float, k_new: int
+           ) -> tuple[float, float]:
     gain = 1.0 - fit.cost_test / cur[1] if cur[1] > 0 else 0.0
     if not fit.ok or fit.cost_train <= 0:
         return -math.inf, math.inf
     dbic = n_eff * math.log(fit.cost_train / cur[0]) + k_new * math.log(max(n_eff, 2.0))
     return float(gain), float(dbic)
-
-
-def _add_confound(out: list[dict[str, Any]], stage: int, effects: list[str], kind: str,
-                  rho: float, note: str) -> None:
-    """Record a confounded set once (the earliest note is kept).
-
-    A degenerate fit is recorded once per added effect, and not at all when that effect is
-    already reported confounded with one of the chosen ones.
-    """
-    for c in out:
-        if c["kind"] == kind and frozenset(c["effects"]) == frozenset(effects):
-            return
-        if kind == "degenerate" and effects[-1] in c["effects"] and (
-                c["kind"] == "pair" or c["effects"][-1] == effects[-1]):
-            return
-    out.append({"stage": stage, "effects": effects, "pair": effects[-2:], "kind": kind,
-                "correlation": rho, "note": note})
-
-
-def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
-    """Why a joint fit is not identifiable, or None (see :func:`select_effects`)."""
-    if not fit.ok:
-        return "fit failed"
-    for name, vals in zip(fit.effects, fit.values, strict=True):
-        eff = EFFECTS[name]
-        x0 = np.asarray(eff.start(prob.base), float)
-        lo, hi = np.asarray(eff.lower, float), np.asarray(eff.upper, float)
-        tol = 1e-3 * (hi - lo)
-        for j, v in enumerate(np.asarray(vals, float)):
-            if v - lo[j] < tol[j] and x0[j] - lo[j] >= tol[j]:
-                return f"{name}.{eff.names[j]} at its lower bound {lo[j]:.3g}"
-            if hi[j] - v < tol[j] and hi[j] - x0[j] >= tol[j]:
-                return f"{name}.{eff.names[j]} at its upper bound {hi[j]:.3g}"
-    if fit.cov is not None and len(fit.effects) > 1:
-        for i, a in enumerate(fit.effects):
-            for b in fit.effects[i + 1:]:
-                if a == b:
-                    continue
-                rho = _corr_between(fit, a, b)
-                if np.isfinite(rho) and rho > max_corr:
-                    return f"{a} and {b} correlate {rho:.3f}"
-    return None
-
-
-def _corr_between(fit: Fit, a: str, b: str) -> float:
-    """Largest |correlation| between a parameter of effect a and one of effect b."""
-    if fit.cov is None:
-        return float("nan")
-    sizes = [EFFECTS[n].k for n in fit.effects]
-    offs = np.concatenate([[0], np.cumsum(sizes)])
-    ia = fit.effects.index(a)
-    ib = fit.effects.index(b)
-    d = np.sqrt(np.maximum(np.diag(fit.cov), 1e-300))
-    corr = fit.cov / np.outer(d, d)
-    block = corr[offs[ia]:offs[ia + 1], offs[ib]:offs[ib + 1]]
-    return float(np.max(np.abs(block))) if block.size else float("nan")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -436,23 +598,15 @@ class _Criteria:
 
 
 @dataclass(frozen=True, kw_only=True)
-class _Screened:
-    """A candidate's linearised fit: one Gauss-Newton step (:meth:`Problem.linear_fit`)."""
-
-    values: FloatArray      # the stepped parameter values (bounded)
-    gain: float             # held-out gain of the linearised residual
-    cost_train: float       # training cost of the linearised residual
-
-
-@dataclass(frozen=True, kw_only=True)
 class _Stage:
-    """Where a stage of the selection starts: the chosen effects and their costs."""
+    """Where a stage of the selection starts: chosen effects, sensors and their costs."""
 
     index: int              # 0-based; reported 1-based
     chosen: Chosen
+    sensors: list[FloatArray]
     cost_train: float
     cost_test: float
-    w: FloatArray           # weighted residual of the chosen effects, shape (rows, n)
+    w: FloatArray           # weighted residual vector
     n_eff: float            # effective number of training samples (for the BIC)
 
     @property
@@ -466,19 +620,124 @@ class _Stage:
         return [e.name for e, _ in self.chosen]
 
 
-def select_effects(prob: Problem, thresholds: dict[str, float], max_effects: int = 3,
-                   dbic_min: float = -6.0, confound_corr: float = 0.9,
-                   only: list[str] | None = None, progress: Any = None,
-                   weights: tuple[float, float] | None = None, screen_top: int = 3,
+class LinearScreen:
+    """Linearised fits of effect columns on top of refitted sensor columns.
+
+    For a residual ``w`` and the sensor columns ``D_s`` (fixed for a stage), the
+    least-squares fit of ``w + [D_s D_e] b`` on the training rows equals, by the
+    Frisch-Waugh-Lovell theorem, the fit of the effect's columns with ``D_s`` projected out:
+    ``E = (I - P_s) D_e``, ``w_perp = (I - P_s) w`` (``P_s`` the projection onto the training
+    rows of ``D_s``, by a QR factorisation made once). The held-out cost is then evaluated
+    with the full step (the sensors' part ``b_s = R^-1 Q^T (-w - D_e b_e)``).
+
+    Parameters
+    ----------
+    D_s : ndarray
+        Sensor columns, shape (n, s).
+    train, test : ndarray of bool
+        Training and held-out rows.
+    """
+
+    def __init__(self, D_s: FloatArray, train: NDArray[np.bool_],
+                 test: NDArray[np.bool_]) -> None:
+        self.D_s, self.train, self.test = D_s, train, test
+        A = D_s[train]
+        keep = np.linalg.norm(A, axis=0) > 0.0 if A.size else np.zeros(0, bool)
+        self.cols = np.nonzero(keep)[0]
+        if self.cols.size:
+            self.Q, self.R = np.linalg.qr(A[:, self.cols])
+            ok = np.abs(np.diag(self.R)) > 1e-12 * max(np.abs(np.diag(self.R)).max(), 1e-300)
+            self.cols, self.Q, self.R = self.cols[ok], *np.linalg.qr(A[:, self.cols[ok]])
+        else:
+            self.Q = np.zeros((int(train.sum()), 0))
+            self.R = np.zeros((0, 0))
+
+    def _perp(self, X: FloatArray) -> FloatArray:
+        return X - self.Q @ (self.Q.T @ X)
+
+    def _sensor_step(self, rhs: FloatArray) -> FloatArray:
+        b = np.zeros(self.D_s.shape[1])
+        if self.cols.size:
+            b[self.cols] = np.linalg.solve(self.R, self.Q.T @ rhs)
+        return b
+
+    def gain(self, w: FloatArray, D_e: FloatArray, clip0: NDArray[np.bool_] | None = None
+             ) -> tuple[float, FloatArray, float]:
+        """Held-out gain of the effect's columns ``D_e`` with the sensors refitted.
+
+        ``1 - C_test(sensors and effect) / C_test(sensors only)``; ``clip0`` marks effect
+        parameters bounded at their start (one-sided: a negative step is set to zero).
+
+        Returns
+        -------
+        gain : float
+        b_e : ndarray
+            The effect's step.
+        c_train : float
+            Training cost with the effect.
+        """
+        w = np.where(np.isfinite(w), w, 0.0)
+        tr, te = self.train, self.test
+        wt = w[tr]
+        b_s0 = self._sensor_step(-wt)
+        c0 = float(np.sum((w[te] + self.D_s[te] @ b_s0) ** 2))
+        E = self._perp(D_e[tr])
+        wp = self._perp(wt)
+        if np.any(E):
+            b_e = np.linalg.lstsq(E, -wp, rcond=None)[0]
+        else:
+            b_e = np.zeros(D_e.shape[1])
+        if clip0 is not None and D_e.shape[1] == 1 and clip0[0] and b_e[0] < 0.0:
+            b_e = np.zeros(1)
+        b_s = self._sensor_step(-wt - D_e[tr] @ b_e)
+        c1 = float(np.sum((w[te] + self.D_s[te] @ b_s + D_e[te] @ b_e) ** 2))
+        c_tr = float(np.sum((wt + self.D_s[tr] @ b_s + D_e[tr] @ b_e) ** 2))
+        return (1.0 - c1 / c0 if c0 > 0 else 0.0), b_e, c_tr
+
+    def best_column(self, w: FloatArray, cols: list[FloatArray]) -> int:
+        """Index of the single column that lowers the training cost most.
+
+        With the sensors refitted: the largest ``(E^T w_perp)^2 / |E|^2``.
+        """
+        w = np.where(np.isfinite(w), w, 0.0)
+        wp = self._perp(w[self.train])
+        C = self._perp(np.stack([c[self.train] for c in cols], axis=1))
+        num = (C.T @ wp) ** 2
+        den = np.sum(C * C, axis=0)
+        score = np.where(den > 0, num / np.maximum(den, 1e-300), -1.0)
+        return int(np.argmax(score))
+
+
+def linear_gain(w: FloatArray, D_s: FloatArray, D_e: FloatArray, train: NDArray[np.bool_],
+                test: NDArray[np.bool_], clip0: NDArray[np.bool_] | None = None
+                ) -> tuple[float, FloatArray, float]:
+    """Held-out gain of the linear fit ``w + [D_s D_e] b`` against ``w + D_s b_s``.
+
+    A one-off :class:`LinearScreen`.
+    """
+    return LinearScreen(D_s, train, test).gain(w, D_e, clip0)
+
+
+def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[FloatArray],
+                   tau_noise: float, max_effects: int = 3, dbic_min: float = -6.0,
+                   confound_corr: float = 0.9,
+                   only: list[str] | None = None, progress: Any = None, screen_top: int = 2,
                    screen_frac: float = 0.5, degenerate_corr: float = 0.995) -> Selection:
     """Greedy forward selection of effects (module docstring).
 
     Parameters
     ----------
     prob : Problem
-        The problem.
+        The problem (weights set from the null).
     thresholds : dict
         Held-out gain an effect must exceed (from the noise-only null), by name.
+    sensors0 : list of ndarray
+        Each part's sensor model fitted with the nominal physics (stage 0).
+    tau_noise : float
+        Autocorrelation time of the noise's residual [samples] (the null's): the effective
+        number of independent samples is the training samples over it. (The residual of a
+        model that misses something is correlated by what it misses, which must not count
+        against the evidence for it.)
     max_effects : int
         Largest number of effects to add.
     dbic_min : float
@@ -489,106 +748,150 @@ def select_effects(prob: Problem, thresholds: dict[str, float], max_effects: int
         Restrict the candidates.
     progress : callable, optional
         ``progress(str)`` for messages.
-    weights : (float, float), optional
-        Noise scales of the rows [N m] (from the null); default: robust scales of the
-        nominal residual.
     screen_top, screen_frac : int, float
         Candidates fitted fully: the ``screen_top`` best of the linearised screening and
-        any whose linearised held-out gain reaches ``screen_frac`` of its threshold; the
-        others are reported with their linearised fit (they cannot be significant).
+        any whose linearised held-out gain reaches ``screen_frac`` of its threshold.
     degenerate_corr : float
-        A joint fit is degenerate (not identifiable, never added) when a parameter ends at
-        a bound its nominal value is not at, or two parameters of different effects
-        correlate beyond this.
+        A joint fit is degenerate when a parameter ends at a bound its nominal value is not
+        at, or two parameters of different effects correlate beyond this.
     """
     crit = _Criteria(thresholds=thresholds, dbic_min=dbic_min, confound_corr=confound_corr,
                      screen_top=screen_top, screen_frac=screen_frac,
                      degenerate_corr=degenerate_corr)
     cands = [c for c in prob.candidates if only is None or c in only]
     chosen: Chosen = []
-    if weights is None:
-        prob.set_weights(chosen)
-    else:
-        prob.s = (float(weights[0]), float(weights[1]))
-    c_tr, c_te, w = prob.cost(chosen)
-    tau, n_eff = _effective_samples(prob, w)
+    sensors = [np.array(s, float) for s in sensors0]
+    c_tr, c_te, w = prob.cost(chosen, sensors)
+    tau, n_eff = effective_samples(prob, w, tau_noise)
     stages: list[dict[str, Any]] = []
-    ranking: list[dict[str, Any]] = []
     confounded: list[dict[str, Any]] = []
-    final = Fit(effects=[], values=[], cost_train=c_tr, cost_test=c_te, n_params=0)
+    final = Fit(effects=[], values=[], sensors=sensors, cost_train=c_tr, cost_test=c_te)
     for index in range(max_effects):
-        st = _Stage(index=index, chosen=chosen, cost_train=c_tr, cost_test=c_te, w=w,
-                    n_eff=n_eff)
+        if index:  # each stage's weights from its own residual (Problem.reweight), and the
+            # chosen effects and sensors refitted under them: the stage's baseline
+            chosen, sensors = _refit(prob, chosen, sensors)
+            c_tr, c_te, w = prob.cost(chosen, sensors)
+            tau, n_eff = effective_samples(prob, w, tau_noise)
+        st = _Stage(index=index, chosen=chosen, sensors=sensors, cost_train=c_tr,
+                    cost_test=c_te, w=w, n_eff=n_eff)
         rows, fits = _assess_candidates(prob, st, cands, crit, progress)
         stages.append({"stage": index + 1, "candidates": rows,
                        "cost_train": c_tr, "cost_test": c_te})
-        if index == 0:
-            ranking = rows
         _note_degenerate(confounded, st, rows)
         sig = [r for r in rows if r["significant"]]
         if not sig:
             break
-        best = sig[0]
+        # a plausible explanation before a suspect (a fit outside its plausibility range
+        # stands in for something else; a plausible one that is significant is preferred)
+        plausible = [r for r in sig if r["plausible"]]
+        best = (plausible or sig)[0]
+        best["selected"] = True
         _note_confounds(prob, confounded, st, rows, best, fits[best["effect"]],
                         crit.confound_corr)
         final = fits[best["effect"]]
-        chosen = final.chosen()
-        c_tr, c_te, w = prob.cost(chosen)
+        chosen, sensors = final.chosen(), final.sensors
+        c_tr, c_te, w = prob.cost(chosen, sensors)
         final.cost_train, final.cost_test = c_tr, c_te
-    params, sensor = apply_effects(prob.base, chosen)
+    # the final model refitted with weights from its own residual: its intervals (and its
+    # sensors') rest on the residual it leaves, not on the stage's weights
+    chosen, sensors = _refit(prob, chosen, sensors)
+    final = (prob.fit(chosen[:-1], chosen[-1][0], chosen[-1][1], sensors) if chosen
+             else prob.fit([], None, None, sensors))
+    chosen, sensors = final.chosen(), final.sensors
+    c_tr, c_te, w = prob.cost(chosen, sensors)
+    tau, _ = effective_samples(prob, w, tau_noise)
+    _note_sensor_confounds(prob, confounded, final, crit.confound_corr)
+    params, _ = apply_effects(prob.base, chosen)
     return Selection(chosen=[e.name for e, _ in chosen], final=final, stages=stages,
-                     ranking=ranking, confounded=confounded, weights=prob.s, tau=tau,
-                     params=params, sensor=sensor,
-                     parameters=parameter_table(final, tau, prob.has_ball))
+                     ranking=_ranking(stages, cands), confounded=confounded, tau=tau,
+                     params=params,
+                     sensors=[sensor_correction(p.sensor_names, s)
+                              for p, s in zip(prob.parts, final.sensors, strict=True)],
+                     parameters=parameter_table(final, tau),
+                     sensor_table=sensor_table(prob, final, tau))
 
 
-def _effective_samples(prob: Problem, w: FloatArray) -> tuple[float, float]:
-    """Autocorrelation time and effective number of training samples of ``w``.
+def _refit(prob: Problem, chosen: Chosen, sensors: list[FloatArray], passes: int = 2
+           ) -> tuple[Chosen, list[FloatArray]]:
+    """Reweight from the current residual and refit the chosen effects and the sensors.
 
-    ``tau`` [samples]: of the weighted residual ``w`` on the training blocks, the larger of
-    the rows; the effective number is the training samples of all rows over ``tau``.
+    Twice: the weights follow the refitted residual.
     """
-    tau = autocorr_time(w[0, prob.train])
-    if prob.has_ball:
-        tau = max(tau, autocorr_time(w[1, prob.train]))
-    n_train = w.shape[0] * int(prob.train.sum())
-    return tau, n_train / tau
+    for _ in range(passes):
+        prob.reweight(chosen, sensors)
+        fit = (prob.fit(chosen[:-1], chosen[-1][0], chosen[-1][1], sensors, max_nfev=25)
+               if chosen else prob.fit([], None, None, sensors, max_nfev=25))
+        chosen, sensors = fit.chosen(), fit.sensors
+    prob.reweight(chosen, sensors)
+    return chosen, sensors
 
 
-def _screen(prob: Problem, st: _Stage, names: list[str]) -> dict[str, _Screened]:
-    """One Gauss-Newton step per candidate on top of the chosen effects (the screening).
+def effective_samples(prob: Problem, w: FloatArray, tau_noise: float
+                      ) -> tuple[float, float]:
+    """The residual's autocorrelation time [samples] and the effective training samples.
 
-    At the first stage the nominal Jacobians are shared with the null.
+    The time is the larger of the noise's and of the current residual's (the intervals'
+    inflation: a residual that is correlated beyond the noise makes its samples count
+    less); the effective number is the training samples over the noise's time alone (the
+    BIC's: see :func:`select_effects`).
     """
-    wv = st.w.ravel()
-    cur_test = st.cost_test
+    tau = max(tau_noise, 1.0)
+    for part, rows in zip(prob.parts, prob.rows_of(w), strict=True):
+        for r in rows.values():
+            tau = max(tau, autocorr_time(r[part.train]))
+    n_train = int(np.sum(prob.train & np.isfinite(w)))
+    return tau, n_train / max(tau_noise, 1.0)
+
+
+def _screen(prob: Problem, st: _Stage, names: list[str]) -> dict[str, tuple]:
+    """One Gauss-Newton step per candidate with the sensors refitted (the screening).
+
+    At the first stage the Jacobians are those the null computed (cached under the same
+    key).
+    """
+    key = ("stage", st.index) if st.index else ("nominal",)
+    D_s = prob.sensor_jacobian(st.chosen, st.sensors, st.w, key=key)
+    screen = LinearScreen(D_s, prob.train, prob.test)
     out = {}
     for name in names:
-        vals, l_tr, l_te = prob.linear_fit(st.chosen, EFFECTS[name], wv)
-        out[name] = _Screened(values=vals, gain=1.0 - l_te / cur_test if cur_test > 0 else 0.0,
-                              cost_train=l_tr)
+        eff = EFFECTS[name]
+        if name == "track_bumps":
+            out[name] = _screen_bump(prob, st, screen, key)
+            continue
+        chosen_names = st.chosen_names
+        if name in chosen_names:
+            continue
+        x0 = np.asarray(eff.start(prob.base), float)
+        D = prob.effect_jacobian(st.chosen, st.sensors, eff, x0, st.w, key=key)
+        clip0 = np.isclose(x0, np.asarray(eff.lower, float))
+        gain, b, c_tr = screen.gain(st.w, D, clip0)
+        vals = np.clip(x0 + b, np.asarray(eff.lower, float), np.asarray(eff.upper, float))
+        out[name] = (vals, gain, c_tr)
     return out
+
+
+def _screen_bump(prob: Problem, st: _Stage, screen: LinearScreen, key: Any) -> tuple:
+    """The best single bump on a grid of positions (linear in its height), by training cost."""
+    cols = prob.bump_columns(st.chosen, st.sensors, st.w, key=key)
+    if not cols:
+        return np.array([0.0, 0.0, 0.1]), 0.0, st.cost_train
+    j = screen.best_column(st.w, [c for _, c in cols])
+    phi_c, col = cols[j]
+    gain, b, c_tr = screen.gain(st.w, col[:, None])
+    return np.array([phi_c, float(np.clip(b[0], -1e-3, 1e-3)), 0.1]), gain, c_tr
 
 
 def _assess_candidates(prob: Problem, st: _Stage, cands: list[str], crit: _Criteria,
                        progress: Any) -> tuple[list[dict[str, Any]], dict[str, Fit]]:
-    """Screen every candidate of a stage, fit the promising ones fully, rate them all.
-
-    Returns
-    -------
-    rows : list of dict
-        One row per candidate (:func:`_assess`), best held-out gain first.
-    fits : dict
-        The full joint fits, by the name of the candidate added.
-    """
-    chosen_names = st.chosen_names
-    names = [n for n in cands if n not in chosen_names or n == "track_bumps"]
+    """Screen every candidate of a stage, fit the promising ones fully, rate them all."""
+    names = [n for n in cands if n not in st.chosen_names or n == "track_bumps"]
     screened = _screen(prob, st, names)
-    top = sorted(names, key=lambda n: -screened[n].gain)[:crit.screen_top]
+    names = [n for n in names if n in screened]
+    top = sorted(names, key=lambda n: -screened[n][1])[:crit.screen_top]
     rows = []
     fits: dict[str, Fit] = {}
     for name in names:
-        full = name in top or screened[name].gain >= crit.screen_frac * crit.threshold(name)
+        full = name in top or screened[name][1] >= crit.screen_frac * crit.threshold(name)
         row, fit = _assess(prob, st, name, screened[name], full, crit)
         if fit is not None:
             fits[name] = fit
@@ -599,59 +902,36 @@ def _assess_candidates(prob: Problem, st: _Stage, cands: list[str], crit: _Crite
     return rows, fits
 
 
-def _assess(prob: Problem, st: _Stage, name: str, screened: _Screened, full: bool,
+def _assess(prob: Problem, st: _Stage, name: str, screened: tuple, full: bool,
             crit: _Criteria) -> tuple[dict[str, Any], Fit | None]:
-    """Rate one candidate added to the chosen effects.
-
-    Parameters
-    ----------
-    prob : Problem
-        The problem.
-    st : _Stage
-        The stage (chosen effects, their costs, the effective sample size).
-    name : str
-        The candidate.
-    screened : _Screened
-        Its linearised fit.
-    full : bool
-        Fit it fully, jointly with the chosen effects (all refitted, started from the
-        screening step: an effect may only show its worth once the others move with it);
-        otherwise it is rated by its linearised fit.
-    crit : _Criteria
-        Thresholds and limits.
-
-    Returns
-    -------
-    row : dict
-        Held-out gain, dBIC, threshold, significance, degeneracy, size, fitted values.
-    fit : Fit or None
-        The full joint fit (None when only linearised).
-    """
+    """Rate one candidate added to the chosen effects (full joint fit or linearised)."""
     eff = EFFECTS[name]
     thr = crit.threshold(name)
     degenerate = None
     fit = None
+    vals0, gain0, ctr0 = screened
     if full:
-        start = np.clip(screened.values,
-                        np.asarray(eff.lower) + 0.5 * np.asarray(eff.scales),
+        start = np.clip(vals0, np.asarray(eff.lower) + 0.5 * np.asarray(eff.scales),
                         np.asarray(eff.upper) - 0.5 * np.asarray(eff.scales))
-        fit = prob.fit(st.chosen, eff, start, max_nfev=40)
-        gain, dbic = _stats(prob, st.costs, fit, st.n_eff, eff.k)
+        fit = prob.fit(st.chosen, eff, start, st.sensors, max_nfev=20)
+        gain, dbic = _stats(st.costs, fit, st.n_eff, eff.k)
         vals = display_values(eff, fit.values[-1])
         degenerate = _degenerate(prob, fit, crit.degenerate_corr)
         size = effect_size(name, fit.values[-1], prob.base)
     else:
-        gain = screened.gain
-        dbic = (st.n_eff * math.log(max(screened.cost_train, 1e-300) / st.cost_train)
+        gain = gain0
+        dbic = (st.n_eff * math.log(max(ctr0, 1e-300) / st.cost_train)
                 + eff.k * math.log(max(st.n_eff, 2.0)))
-        vals = display_values(eff, screened.values)
-        size = effect_size(name, screened.values, prob.base)
+        vals = display_values(eff, vals0)
+        size = effect_size(name, vals0, prob.base)
     big = size >= MIN_SIZE.get(name, 0.0)
-    row = {"effect": name, "heldout_gain": gain, "dbic": dbic,
+    why = plausibility(name, vals, prob.base)
+    row = {"effect": name, "stage": st.index + 1, "heldout_gain": gain, "dbic": dbic,
+           "plausible": why is None, "implausible_because": why,
            "threshold": thr,
            "significant": bool(full and gain > thr and dbic < crit.dbic_min
                                and degenerate is None and big),
-           "degenerate": degenerate,
+           "selected": False, "degenerate": degenerate,
            "size": size, "below_min_size": not big,
            "fit": "full" if full else "linearised (screened out)",
            "values": dict(zip(eff.names, map(float, vals), strict=True)),
@@ -668,6 +948,96 @@ def _describe(index: int, row: dict[str, Any]) -> str:
             + (f" [degenerate: {row['degenerate']}]" if row["degenerate"] else "")
             + ("" if not row["below_min_size"]
                else f" [size {row['size']:.2g} below {MIN_SIZE[name]:g}]"))
+
+
+def _ranking(stages: list[dict[str, Any]], cands: list[str]) -> list[dict[str, Any]]:
+    """Every effect: its figures alone (stage 1) and, if selected, at its stage.
+
+    Selected effects first in the order of selection, then by their gain alone.
+    """
+    first = {r["effect"]: r for r in stages[0]["candidates"]} if stages else {}
+    out = []
+    for name in cands:
+        r1 = first.get(name)
+        if r1 is None:
+            continue
+        sel = next((r for st in stages for r in st["candidates"]
+                    if r["effect"] == name and r.get("selected")), None)
+        out.append({
+            "effect": name, "selected": sel is not None,
+            "stage_selected": sel["stage"] if sel else None,
+            "heldout_gain": r1["heldout_gain"], "threshold": r1["threshold"],
+            "dbic": r1["dbic"], "fit": r1["fit"], "degenerate": r1["degenerate"],
+            "gain_at_selection": sel["heldout_gain"] if sel else None,
+            "threshold_at_selection": sel["threshold"] if sel else None,
+            "dbic_at_selection": sel["dbic"] if sel else None,
+            "values_at_selection": sel["values"] if sel else None})
+    out.sort(key=lambda r: (not r["selected"], r["stage_selected"] or 0, -r["heldout_gain"]))
+    return out
+
+
+# -- degenerate and confounded fits -----------------------------------------------------------
+
+
+def _add_confound(out: list[dict[str, Any]], stage: int, effects: list[str], kind: str,
+                  rho: float, note: str) -> None:
+    """Record a confounded set once (the earliest note is kept)."""
+    for c in out:
+        if c["kind"] == kind and frozenset(c["effects"]) == frozenset(effects):
+            return
+        if kind == "degenerate" and effects[-1] in c["effects"] and (
+                c["kind"] == "pair" or c["effects"][-1] == effects[-1]):
+            return
+    out.append({"stage": stage, "effects": effects, "pair": effects[-2:], "kind": kind,
+                "correlation": rho, "note": note})
+
+
+def _corr_matrix(fit: Fit) -> FloatArray | None:
+    if fit.cov is None:
+        return None
+    d = np.sqrt(np.maximum(np.diag(fit.cov), 1e-300))
+    return fit.cov / np.outer(d, d)
+
+
+def _offsets(fit: Fit) -> FloatArray:
+    return np.concatenate([[0], np.cumsum([EFFECTS[n].k for n in fit.effects])]).astype(int)
+
+
+def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
+    """Why a joint fit is not identifiable, or None (see :func:`select_effects`)."""
+    if not fit.ok:
+        return "fit failed"
+    for name, vals in zip(fit.effects, fit.values, strict=True):
+        eff = EFFECTS[name]
+        x0 = np.asarray(eff.start(prob.base), float)
+        lo, hi = np.asarray(eff.lower, float), np.asarray(eff.upper, float)
+        tol = 1e-3 * (hi - lo)
+        for j, v in enumerate(np.asarray(vals, float)):
+            if v - lo[j] < tol[j] and x0[j] - lo[j] >= tol[j]:
+                return f"{name}.{eff.names[j]} at its lower bound {lo[j]:.3g}"
+            if hi[j] - v < tol[j] and hi[j] - x0[j] >= tol[j]:
+                return f"{name}.{eff.names[j]} at its upper bound {hi[j]:.3g}"
+    corr = _corr_matrix(fit)
+    if corr is not None and len(fit.effects) > 1:
+        offs = _offsets(fit)
+        for i, a in enumerate(fit.effects):
+            for j in range(i + 1, len(fit.effects)):
+                block = corr[offs[i]:offs[i + 1], offs[j]:offs[j + 1]]
+                rho = float(np.max(np.abs(block))) if block.size else 0.0
+                if np.isfinite(rho) and rho > max_corr:
+                    return f"{a} and {fit.effects[j]} correlate {rho:.3f}"
+    return None
+
+
+def _corr_between(fit: Fit, a: str, b: str) -> float:
+    """Largest |correlation| between a parameter of effect a and one of effect b."""
+    corr = _corr_matrix(fit)
+    if corr is None:
+        return float("nan")
+    offs = _offsets(fit)
+    ia, ib = fit.effects.index(a), fit.effects.index(b)
+    block = corr[offs[ia]:offs[ia + 1], offs[ib]:offs[ib + 1]]
+    return float(np.max(np.abs(block))) if block.size else float("nan")
 
 
 def _note_degenerate(confounded: list[dict[str, Any]], st: _Stage,
@@ -701,9 +1071,10 @@ def _note_confounds(prob: Problem, confounded: list[dict[str, Any]], st: _Stage,
                 or other["heldout_gain"] <= 0):
             continue
         e_b = EFFECTS[other["effect"]]
-        pair_fit = prob.fit(best_fit.chosen(), e_b, None, max_nfev=40)
+        pair_fit = prob.fit(best_fit.chosen(), e_b, None, best_fit.sensors, max_nfev=25)
         rho = _corr_between(pair_fit, best["effect"], other["effect"])
-        extra_gain = 1.0 - pair_fit.cost_test / best_fit.cost_test
+        extra_gain = (1.0 - pair_fit.cost_test / best_fit.cost_test
+                      if best_fit.cost_test > 0 else 0.0)
         if rho > confound_corr or extra_gain < 0.1 * best["heldout_gain"]:
             _add_confound(confounded, st.index + 1, [best["effect"], other["effect"]], "pair",
                           rho, f"{best['effect']} and {other['effect']} explain the same "
@@ -713,25 +1084,142 @@ def _note_confounds(prob: Problem, confounded: list[dict[str, Any]], st: _Stage,
                           f"{best['effect']} is kept as the larger")
 
 
-def parameter_table(fit: Fit, tau: float, has_ball: bool) -> list[dict[str, Any]]:
-    """Fitted values with 95 % intervals (covariance inflated by the autocorrelation)."""
+def _note_sensor_confounds(prob: Problem, confounded: list[dict[str, Any]], fit: Fit,
+                           confound_corr: float) -> None:
+    """Report physics parameters that correlate beyond ``confound_corr`` with a sensor's."""
+    corr = _corr_matrix(fit)
+    if corr is None or not fit.effects:
+        return
+    offs = _offsets(fit)
+    names = [(i, n) for i, p in enumerate(prob.parts) for n in p.sensor_names]
+    for k, eff in enumerate(fit.effects):
+        for c in range(offs[k], offs[k + 1]):
+            for j, (i, sname) in enumerate(names):
+                rho = abs(float(corr[c, fit.n_params + j]))
+                if rho > confound_corr:
+                    pname = EFFECTS[eff].names[c - offs[k]]
+                    _add_confound(confounded, 0, [eff, f"sensor:{sname}"], "sensor", rho,
+                                  f"{eff}.{pname} correlates {rho:.2f} with the sensor model's "
+                                  f"{sname} of {prob.parts[i].name}: they are only known "
+                                  "together from these recordings")
+
+
+# -- tables ----------------------------------------------------------------------------------
+
+
+def parameter_table(fit: Fit, tau: float) -> list[dict[str, Any]]:
+    """Fitted effect values with 95 % intervals (covariance inflated by the autocorrelation)."""
     out = []
     if not fit.effects:
         return out
-    cov = fit.cov if fit.cov is not None else None
     i = 0
     for name, vals in zip(fit.effects, fit.values, strict=True):
         eff = EFFECTS[name]
         disp = display_values(eff, vals)
         for j, pname in enumerate(eff.names):
-            var = float(cov[i + j, i + j]) * tau if cov is not None else float("nan")
+            var = float(fit.cov[i + j, i + j]) * tau if fit.cov is not None else float("nan")
             sd = math.sqrt(var) if var >= 0 else float("nan")
-            if name == "axis_misalignment":
-                eps = disp[0]
-                sd = sd / max(math.sin(eps), 1e-6) if eps > 0 else math.sqrt(2 * max(sd, 0))
             out.append({"effect": name, "name": pname, "unit": eff.units[j],
                         "value": float(disp[j]), "ci95": [float(disp[j] - 1.96 * sd),
                                                           float(disp[j] + 1.96 * sd)],
                         "std": sd})
         i += eff.k
+    return out
+
+
+def sensor_table(prob: Problem, fit: Fit, tau: float) -> list[dict[str, Any]]:
+    """Each part's fitted sensor model with 95 % intervals.
+
+    ``at_bound`` is the bound a value ran to (within 0.1 % of its range), else None: such a
+    value is not identified by the recording (:func:`bfr_diagnose.api` notes it).
+    """
+    out = []
+    j = fit.n_params
+    for p, vals in zip(prob.parts, fit.sensors, strict=True):
+        for name, v in zip(p.sensor_names, vals, strict=True):
+            var = (float(fit.cov[j, j]) * tau if fit.cov is not None and j < fit.cov.shape[0]
+                   else float("nan"))
+            sd = math.sqrt(var) if var >= 0 else float("nan")
+            sp = sensor_param(name)
+            margin = 1e-3 * (sp.upper - sp.lower)
+            bound = (sp.lower if v - sp.lower <= margin else
+                     sp.upper if sp.upper - v <= margin else None)
+            out.append({"recording": p.name, "name": name, "unit": sp.unit, "value": float(v),
+                        "ci95": [float(v - 1.96 * sd), float(v + 1.96 * sd)], "std": sd,
+                        "description": sp.description, "at_bound": bound})
+            j += 1
+    return out
+
+
+# -- one rig, many recordings -----------------------------------------------------------------
+
+
+def between_recordings(prob: Problem, sel: Selection) -> dict[str, Any]:
+    """Per-recording values of the selected effects and intervals that include their spread.
+
+    Every selected effect that enters a recording's rows is fitted on that recording alone
+    (with its sensors, from the joint values). For each parameter the per-recording values
+    ``y_i +- s_i`` are combined as a random-effects mean (DerSimonian and Laird): the
+    between-recording variance ``tau^2 = max(0, (Q - (k - 1)) / (S1 - S2 / S1))`` with
+    ``Q = sum w_i (y_i - y_w)^2``, ``w_i = 1 / s_i^2``, ``S1 = sum w_i``, ``S2 = sum w_i^2``,
+    and the joint value's interval is widened to
+    ``+- 1.96 sqrt(s_joint^2 + 1 / sum(1 / (s_i^2 + tau^2)) - 1 / sum(1 / s_i^2))``, i.e. by
+    what the spread between recordings adds to the uncertainty of their mean. A
+    recording whose own fit is degenerate or leaves a parameter undetermined (standard
+    error above the joint value's range) does not count.
+
+    Returns
+    -------
+    dict
+        ``per_recording`` (rows: recording, effect, parameter, value, std, used) and
+        ``joint`` (per parameter: value, ci95 of the joint fit, tau, ci95 with the spread,
+        recordings used).
+    """
+    if len(prob.parts) < 2 or not sel.chosen:
+        return {"per_recording": [], "joint": []}
+    rows: list[dict[str, Any]] = []
+    chosen = sel.final.chosen()
+    for i, part in enumerate(prob.parts):
+        mine = [(e, v) for e, v in chosen if part.affected_by(e)]
+        if not mine:
+            continue
+        fit = prob.fit(mine[:-1], mine[-1][0], mine[-1][1], sel.final.sensors, max_nfev=25,
+                       only_part=i)
+        w = prob.part_weighted(i, fit.chosen(), fit.sensors[i]).reshape(len(part.rows), -1)
+        tau = max(autocorr_time(r[part.train]) for r in w)
+        degenerate = _degenerate(prob, fit, 0.995)
+        for r in parameter_table(fit, tau):
+            rows.append({"recording": part.name, **r, "degenerate": degenerate})
+    joint = []
+    for p in sel.parameters:
+        mine = [r for r in rows if r["effect"] == p["effect"] and r["name"] == p["name"]]
+        joint.append(_random_effects(p, mine))
+    return {"per_recording": rows, "joint": joint}
+
+
+def _random_effects(p: dict[str, Any], mine: list[dict[str, Any]]) -> dict[str, Any]:
+    """DerSimonian-Laird between-recording spread of one parameter (:func:`between_recordings`)."""
+    sd_joint = p["std"] if math.isfinite(p["std"]) else 0.0
+    span = max(abs(p["value"]), 10.0 * sd_joint, 1e-12)
+    use = [r for r in mine if r["degenerate"] is None and math.isfinite(r["std"])
+           and 0.0 < r["std"] < span]
+    for r in mine:
+        r["used"] = r in use
+    out = {"effect": p["effect"], "name": p["name"], "value": p["value"],
+           "ci95_joint": p["ci95"], "recordings_used": len(use), "tau": 0.0,
+           "ci95": p["ci95"]}
+    if len(use) < 2:
+        return out
+    y = np.array([r["value"] for r in use])
+    s2 = np.array([r["std"] for r in use]) ** 2
+    w = 1.0 / s2
+    yw = float(np.sum(w * y) / np.sum(w))
+    q = float(np.sum(w * (y - yw) ** 2))
+    s1, s2w = float(np.sum(w)), float(np.sum(w ** 2))
+    tau2 = max(0.0, (q - (len(use) - 1)) / max(s1 - s2w / s1, 1e-300))
+    extra = 1.0 / float(np.sum(1.0 / (s2 + tau2))) - 1.0 / s1
+    half = 1.96 * math.sqrt(sd_joint ** 2 + max(extra, 0.0))
+    out.update(tau=math.sqrt(tau2), q=q, random_effects_mean=float(
+        np.sum(y / (s2 + tau2)) / np.sum(1.0 / (s2 + tau2))),
+        ci95=[p["value"] - half, p["value"] + half])
     return out

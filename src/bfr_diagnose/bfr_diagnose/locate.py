@@ -24,7 +24,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from bfr_model.dynamics import RigidModel
+from bfr_model.dynamics import RigidModel, frame_gravity, joint_torque
 from bfr_model.params import RigParams
 from numpy.typing import NDArray
 from scipy.stats import chi2
@@ -54,9 +54,9 @@ def _test(r: FloatArray, msq: FloatArray, tau: float) -> tuple[float, float]:
     return float(np.sqrt(ratio)), float(chi2.sf(ratio * dof, dof))
 
 
-def locate(prep: Prepared, res: Residual, sigma: tuple[float, float], tau: float,
+def locate(prep: Prepared, res: Residual, sigma: Any, tau: float,
            window: float = 0.5, alpha: float = 0.01,
-           msq: list[FloatArray] | None = None) -> dict[str, Any]:
+           msq: Any = None, rows: tuple[int, ...] | None = None) -> dict[str, Any]:
     """Windows and state regions where the nominal residual exceeds the noise.
 
     Parameters
@@ -65,17 +65,19 @@ def locate(prep: Prepared, res: Residual, sigma: tuple[float, float], tau: float
         Preprocessed recording.
     res : Residual
         Equation error of the nominal model.
-    sigma : (float, float)
-        Noise scales of rows 1, 2 [N m] (used when ``msq`` is not given).
+    sigma : sequence of float
+        Noise scales of rows 1-3 [N m, N m, m] (used when ``msq`` is not given).
     tau : float
         Autocorrelation time of the residual under the null [samples].
     window : float
         Window length [s].
     alpha : float
         Family-wise significance level.
-    msq : list of ndarray, optional
-        Expected square of the noise residual at each kept sample, rows 1, 2 (from the
+    msq : sequence of ndarray, optional
+        Expected square of the noise residual at each kept sample, rows 1-3 (from the
         noise-injection null; the noise is not stationary).
+    rows : tuple of int, optional
+        The rows to test (default: 1, and 2 and 3 with a ball).
 
     Returns
     -------
@@ -83,7 +85,9 @@ def locate(prep: Prepared, res: Residual, sigma: tuple[float, float], tau: float
         ``global`` (per-row RMS ratio and p-value), ``windows`` (flagged, worst first),
         ``n_windows``, ``regions`` (flagged state bins, worst first), ``all_regions``.
     """
-    rows = _rows_under_null(prep, res, sigma, msq)
+    if rows is None:
+        rows = (1, 2, 3) if prep.has_ball else (1,)
+    rows = _rows_under_null(res, sigma, msq, rows)
     glob = {}
     for name, row in rows.items():
         ratio, p = _test(row.r, row.msq, tau)
@@ -105,8 +109,11 @@ class _Row:
     msq: FloatArray     # [N^2 m^2]
 
 
-def _rows_under_null(prep: Prepared, res: Residual, sigma: tuple[float, float],
-                     msq: list[FloatArray] | None) -> dict[str, _Row]:
+_ROW_NAMES = {1: "frame_torque_row", 2: "ball_row", 3: "ball_distance_row"}
+
+
+def _rows_under_null(res: Residual, sigma: Any, msq: Any,
+                     rows: tuple[int, ...]) -> dict[str, _Row]:
     """The rows to test, by name: the null's ``msq`` where given, else ``sigma^2``."""
     idx = res.idx
 
@@ -115,10 +122,7 @@ def _rows_under_null(prep: Prepared, res: Residual, sigma: tuple[float, float],
             return np.asarray(msq[i], float)
         return np.full(idx.size, float(sigma[i]) ** 2)
 
-    rows = {"frame_torque_row": _Row(r=res.r1, msq=expected(0))}
-    if prep.has_ball:
-        rows["ball_row"] = _Row(r=res.r2, msq=expected(1))
-    return rows
+    return {_ROW_NAMES[r]: _Row(r=res.rows[r - 1], msq=expected(r - 1)) for r in rows}
 
 
 def _tested(rows: dict[str, _Row], m: NDArray[np.bool_], tau: float) -> dict[str, Any]:
@@ -289,46 +293,48 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
     dt = float(prep.t[1] - prep.t[0])
     nh = max(round(horizon / dt), 1)
     step = max(round(every / dt), 1)
+    sensor = sensor or SensorCorrection()
+    if prep.frame_held:  # the frame does not move: a frame too heavy to turn
+        params = params.replace(**{"frame.inertia": 1e6})
     model = RigidModel(params)
     ok = (prep.ball_ok if prep.has_ball else prep.frame_ok) & test_mask_t
     psi_w, _ = prep.psi_for(sensor)
-    err = {"theta": [], "theta_dot": [], "ball_angle": []}
+    u = prep.u_for(sensor)
+    theta = prep.theta + sensor.theta_zero
+    err: dict[str, list] = {"theta": [], "theta_dot": [], "ball_angle": []}
     traces = []
     n_win = 0
     jf = params.frame.inertia
-    jp = params.joint
-    k_u = params.actuator.torque_gain
     for i0 in range(0, prep.n - nh - 1, step):
         if not ok[i0:i0 + nh + 1].all():
             continue
+        seg = slice(i0, i0 + nh + 1)
         if prep.has_ball:
             if not (np.isfinite(phi[i0]) and np.isfinite(phi_dot[i0])):
                 continue
-            x = np.array([prep.theta[i0], phi[i0], prep.theta_dot[i0], phi_dot[i0], 0.0, 0.0])
+            x = np.array([theta[i0], phi[i0], prep.theta_dot[i0], phi_dot[i0], 0.0, 0.0])
             xs = np.empty((nh + 1, 4))
             xs[0] = x[:4]
             for k in range(nh):
-                x = model.step(x, prep.u[i0 + k], dt, 1)
+                x = model.step(x, u[i0 + k], dt, 1)
                 xs[k + 1] = x[:4]
             if not np.all(np.isfinite(xs)):
                 continue
-            seg = slice(i0, i0 + nh + 1)
             ball_w = model.curve.ball_angle(xs[:, 1]) - xs[:, 0]
-            e_b = ball_w - psi_w[seg]
-            err["ball_angle"].append(e_b[1:])
+            err["ball_angle"].append((ball_w - psi_w[seg])[1:])
         else:
-            th, v = prep.theta[i0], prep.theta_dot[i0]
+            th, v = theta[i0], prep.theta_dot[i0]
             xs = np.empty((nh + 1, 4))
             xs[0] = [th, 0.0, v, 0.0]
             for k in range(nh):
-                a = (k_u * prep.u[i0 + k] - jp.viscous_friction * v
-                     - jp.coulomb_friction * np.tanh(v / jp.coulomb_smoothing)) / jf
+                a = (joint_torque(u[i0 + k], v, model.P)
+                     - frame_gravity(np.sin(th), np.cos(th), model.P)) / jf
                 th += dt * v + 0.5 * dt * dt * a
                 v += dt * a
                 xs[k + 1] = [th, 0.0, v, 0.0]
-            seg = slice(i0, i0 + nh + 1)
-        err["theta"].append((xs[:, 0] - prep.theta[seg])[1:])
-        err["theta_dot"].append((xs[:, 2] - prep.theta_dot[seg])[1:])
+        if not prep.frame_held:
+            err["theta"].append((xs[:, 0] - theta[seg])[1:])
+            err["theta_dot"].append((xs[:, 2] - prep.theta_dot[seg])[1:])
         n_win += 1
         if len(traces) < keep_traces:
             tr = {"t": prep.t[seg].tolist(), "theta_dot": xs[:, 2].tolist()}

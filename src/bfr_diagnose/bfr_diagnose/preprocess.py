@@ -6,29 +6,39 @@ Steps (docs/diagnosis.md):
 2. Frame angle. If the encoder is fine (resolution below 1e-4 rad) theta is anti-aliased
    (zero-phase Hann of ``antialias`` on a 4x finer grid), smoothed with a Savitzky-Golay
    filter (cubic, window ``sg_theta``) and differentiated. If theta is coarse (the NTNU logs
-   print 6 significant digits: 1-10 mrad) the servo's velocity estimate is used:
-   ``theta_dot(t) = dtheta(t + d)`` (the logged estimate lags by ``d``), ``theta`` is its
-   integral fused with the coarse angle by a slow low-pass of the difference
-   (complementary filter, ``fuse_time``).
+   print 6 significant digits: 1-10 mrad) the logged velocity is used:
+   ``theta_dot(t) = dtheta(t + d)``, ``d`` the velocity's lag **measured on this
+   recording** (:func:`bfr_model.io.timing.velocity_lag`; the NTNU rig: 6.4 ms, another
+   rig: anything, 0 included), ``theta`` its integral fused with the coarse angle by a slow
+   low-pass of the difference (complementary filter, ``fuse_time``).
 3. Torque: the held command's cell means (its integral is exact), the same anti-alias and
-   Savitzky-Golay filters as theta.
-4. Ball. Only the distinct camera fixes are used (the logs hold the last fix between
-   fixes). The fix at ``t_f`` shows the ball where it was at ``t_f - L`` (camera latency L):
-   its world polar angle ``psi_w = atan2(x - c_x, y - c_y)`` (clockwise from +y, the rig's
-   convention; ``c`` a camera origin offset, zero unless fitted) is unwrapped, placed at
-   ``t_f - L``, put through the same anti-alias filter as theta and smoothed with a
-   Savitzky-Golay filter (window ``sg_ball``). The ball-centre angle in the frame is
-   ``psi = theta + psi_w`` (DEVELOPERS.md); the model's contact angle ``phi`` is obtained by
-   inverting ``psi = ball_angle(phi)`` of the model's curve (done in
-   :mod:`~bfr_diagnose.residual`, since the curve is a fitted quantity). Camera
-   corrections (:class:`SensorCorrection`) re-smooth the fixes exactly (offset) or shift
-   them in time (latency).
+   Savitzky-Golay filters as theta. A drive that applies the logged torque ``d_u`` later is
+   a sensor correction (:meth:`Prepared.u_for`: ``u(t - d_u)``), fitted per recording.
+4. Ball. Only the distinct camera fixes are used (a log holds the last fix between fixes,
+   at any ratio of lines to fixes). A fix's time is its own stamp when the source has one
+   (a bag's header stamp), else the line where it first appears. The fix at ``t_f`` shows
+   the ball where it was at ``t_f - L`` (camera latency L): its world polar angle
+   ``psi_w = atan2(x - c_x, y - c_y) + alpha`` (clockwise from +y, the rig's convention;
+   ``c`` a camera origin offset, ``alpha`` a camera rotation: the camera logs
+   ``s Rot(alpha) true + c``) is unwrapped, placed at ``t_f - L``, put through the same
+   anti-alias filter as theta and smoothed with a Savitzky-Golay filter (window
+   ``sg_ball``); the ball's distance from the shaft ``rho = |(x, y) - c| / s`` (camera
+   scale s) likewise. The ball-centre angle in the frame is ``psi = theta + theta_0 +
+   psi_w`` (DEVELOPERS.md; ``theta_0`` the encoder's zero against the frame's shape); the
+   model's contact angle ``phi`` is obtained by inverting ``psi = ball_angle(phi)`` of the
+   model's curve (done in :mod:`~bfr_diagnose.residual`, since the curve is a fitted
+   quantity). Camera corrections (:class:`SensorCorrection`) re-smooth the fixes exactly
+   (offset) or shift them in time (latency).
 5. Noise: camera noise from the fixes themselves (:func:`fix_noise`), encoder resolution,
    high-frequency scatter of a logged velocity; used by the noise-only null.
 6. Segments: runs of valid ball fixes without gaps longer than ``max_gap``; the first and
    last ``edge`` seconds of each segment are dropped. Recordings without usable ball fixes
    (or with ``--ball no``) give one frame-only segment (row 1 with the ball terms off).
-   Several runs of one log are preprocessed one by one and stitched (:func:`stitch`).
+   A recording whose frame does not turn while the ball moves is **frame-held**: its ball
+   rows alone are analysed (the frame's row would need the unknown holding torque).
+   A recording is first cut where its samples stop for longer than ``max_line_gap``
+   (:func:`split_pieces`); pieces and runs too short to use are dropped and said; the rest
+   are preprocessed one by one and stitched by kind (:func:`stitch`).
 
 Every operation is zero-phase.
 """
@@ -36,18 +46,21 @@ Every operation is zero-phase.
 from __future__ import annotations
 
 import itertools
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
+from bfr_model.io.timing import corrected_velocity, velocity_lag
 from bfr_model.recording import Recording
 from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_filter
 
 from bfr_diagnose import DiagnoseError
 
-__all__ = ["PrepConfig", "Prepared", "SensorCorrection", "fix_noise", "prepare",
-           "prepare_runs", "segments_from_mask", "stitch"]
+__all__ = ["Piece", "PrepConfig", "Prepared", "SensorCorrection", "fix_noise", "frame_held",
+           "plan_parts", "prepare", "prepare_pieces", "prepare_runs", "segments_from_mask",
+           "split_pieces", "stitch"]
 
 FloatArray = NDArray[np.float64]
 
@@ -60,19 +73,24 @@ class PrepConfig:
     sg_theta: float = 0.02         # [s] Savitzky-Golay window for theta (fine encoder)
     sg_ball: float = 0.03          # [s] Savitzky-Golay window for the ball's world angle
     sg_order: int = 3              # [-] polynomial order
-    dtheta_delay: float | None = None  # [s] lag of a logged velocity (None: from meta/0)
+    dtheta_delay: float | None = None  # [s] lag of a logged velocity (None: measured)
+    dtheta_c2: float = 0.0         # [s^2] its second-order term when the lag is given
     fuse_time: float = 0.5         # [s] complementary filter time constant (coarse theta)
     coarse_theta: float = 1e-4     # [rad] resolution above which theta is treated as coarse
     max_gap: float = 0.05          # [s] longest gap between fixes inside a segment
-    edge: float = 0.15             # [s] dropped at both ends of each segment
-    min_segment: float = 1.0       # [s] shortest usable segment
+    max_line_gap: float = 0.05     # [s] a recording is cut where its samples stop longer
+    edge: float = 0.05             # [s] dropped at both ends of each segment
+    min_segment: float = 0.3       # [s] shortest usable segment
     ball: str = "auto"             # "auto", "yes" or "no"
     antialias: float = 0.01        # [s] width of the Hann anti-alias filter (angle, torque)
+    width_factor: float = 1.0      # [-] every filter width times this (the null's x1.4)
 
 
 @dataclass(frozen=True)
 class SensorCorrection:
-    """Camera extrinsics and timing fitted on top of the nominal sensor model.
+    """A recording's sensor conventions, fitted on top of the nominal sensor model.
+
+    The camera logs ``(x, y) = scale Rot(rotation) (x, y)_true + (offset_x, offset_y)``.
 
     Attributes
     ----------
@@ -80,18 +98,37 @@ class SensorCorrection:
         [s] camera delay beyond the nominal ``latency0``: a fix shows the ball where it was
         ``latency0 + latency`` before it arrived.
     offset_x, offset_y : float
-        [m] camera origin off the shaft axis: the camera reports ``(x, y) = true + (offset_x,
-        offset_y)`` (world frame), i.e. the shaft axis appears at ``(offset_x, offset_y)``.
-        Preprocessing subtracts it before taking the ball's world angle.
+        [m] camera origin off the shaft axis (world frame): the shaft axis appears at
+        ``(offset_x, offset_y)``. Preprocessing subtracts it before taking the ball's world
+        angle and distance.
+    rotation : float
+        [rad] camera rotation about the shaft axis (counter-clockwise): the world angle
+        ``atan2(x, y)`` (clockwise from +y) reads ``rotation`` too small.
+    scale : float
+        [-] camera scale: the ball's distance from the shaft reads ``scale`` times its own.
+    theta_zero : float
+        [rad] the encoder's zero against the frame's shape: the true frame angle is the
+        logged one plus ``theta_zero`` (a frame mounted turned on its shaft).
+    torque_delay : float
+        [s] the drive applies a logged torque this much later (negative: earlier).
     """
 
     latency: float = 0.0
     offset_x: float = 0.0
     offset_y: float = 0.0
+    rotation: float = 0.0
+    scale: float = 1.0
+    theta_zero: float = 0.0
+    torque_delay: float = 0.0
 
     def __add__(self, other: SensorCorrection) -> SensorCorrection:
-        return SensorCorrection(self.latency + other.latency, self.offset_x + other.offset_x,
-                                self.offset_y + other.offset_y)
+        return SensorCorrection(latency=self.latency + other.latency,
+                                offset_x=self.offset_x + other.offset_x,
+                                offset_y=self.offset_y + other.offset_y,
+                                rotation=self.rotation + other.rotation,
+                                scale=self.scale * other.scale,
+                                theta_zero=self.theta_zero + other.theta_zero,
+                                torque_delay=self.torque_delay + other.torque_delay)
 
     @property
     def has_offset(self) -> bool:
@@ -112,27 +149,41 @@ class _Fixes:
     antialias: float = 0.0               # [s] the Hann anti-alias width (as theta, torque)
 
 
-def _smooth_ball(fx: _Fixes, tg: FloatArray, ox: float, oy: float
-                 ) -> tuple[FloatArray, FloatArray]:
-    """Smoothed world angle ``atan2(x - ox, y - oy)`` of the ball and its rate on the grid.
+def _smooth_ball(fx: _Fixes, tg: FloatArray) -> tuple[FloatArray, ...]:
+    """The ball's world position and velocity on the grid, smoothed (NaN outside segments).
 
-    The same zero-phase Hann anti-alias filter as the frame angle and the torque, then the
-    Savitzky-Golay smoothing: ``psi = theta + psi_w`` adds two signals that must have been
-    filtered alike (with the anti-alias on theta only, the ball row of a noise-free
-    simulation kept a residual ten times its processing floor).
+    Each coordinate of the fixes goes through the same zero-phase Hann anti-alias filter as
+    the frame angle and the torque, then the Savitzky-Golay smoothing: ``psi = theta +
+    psi_w`` adds two signals that must have been filtered alike (with the anti-alias on
+    theta only, the ball row of a noise-free simulation kept a residual ten times its
+    processing floor). The filters are linear, so a camera correction (offset, rotation,
+    scale) applies exactly to the smoothed position (:meth:`Prepared.ball_for`).
+
+    Returns
+    -------
+    x, y, x_dot, y_dot : ndarray
+        [m], [m/s] on the grid.
     """
     dt = float(tg[1] - tg[0])
-    psi_w = np.full(tg.size, np.nan)
-    psi_wd = np.full(tg.size, np.nan)
-    ang = np.unwrap(np.arctan2(fx.x - ox, fx.y - oy))
+    out = [np.full(tg.size, np.nan) for _ in range(4)]
     for a, b, i0, i1 in fx.segs:
-        if fx.antialias > 0.0:
-            y = _antialiased(fx.tf[a:b], ang[a:b], tg[i0:i1], fx.antialias, hold=False)
-        else:
-            y = np.interp(tg[i0:i1], fx.tf[a:b], ang[a:b])
-        psi_w[i0:i1] = savgol_filter(y, fx.sgw, fx.order)
-        psi_wd[i0:i1] = savgol_filter(y, fx.sgw, fx.order, deriv=1, delta=dt)
-    return psi_w, psi_wd
+        for j, src in enumerate((fx.x, fx.y)):
+            if fx.antialias > 0.0:
+                y = _antialiased(fx.tf[a:b], src[a:b], tg[i0:i1], fx.antialias, hold=False)
+            else:
+                y = np.interp(tg[i0:i1], fx.tf[a:b], src[a:b])
+            out[j][i0:i1] = savgol_filter(y, fx.sgw, fx.order)
+            out[j + 2][i0:i1] = savgol_filter(y, fx.sgw, fx.order, deriv=1, delta=dt)
+    return tuple(out)
+
+
+def _world_angle(x: FloatArray, y: FloatArray) -> FloatArray:
+    """``atan2(x, y)`` (clockwise from +y), unwrapped along the finite samples."""
+    out = np.full(x.size, np.nan)
+    ok = np.isfinite(x) & np.isfinite(y)
+    if ok.any():
+        out[ok] = np.unwrap(np.arctan2(x[ok], y[ok]))
+    return out
 
 
 @dataclass
@@ -150,12 +201,20 @@ class Prepared:
     psi_w, psi_w_dot : ndarray
         Smoothed world polar angle of the ball centre [rad] and rate [rad/s], at nominal
         latency; NaN outside ball segments.
+    rho : ndarray
+        Smoothed distance of the ball centre from the shaft as the camera reports it [m]
+        (NaN outside ball segments).
+    ball_xy : ndarray or None
+        Smoothed world position and velocity of the ball as the camera reports it, shape
+        (4, n): x, y [m], x_dot, y_dot [m/s] (NaN outside ball segments).
     ball_ok : ndarray of bool
         Grid samples inside a usable ball segment (edges dropped).
     frame_ok : ndarray of bool
         Grid samples usable for the frame-only row (edges of the run dropped).
     has_ball : bool
         Whether the ball rows apply.
+    frame_held : bool
+        The frame did not turn (the ball rows alone are analysed).
     latency0 : float
         Camera latency assumed when placing the fixes [s].
     noise : dict
@@ -175,43 +234,66 @@ class Prepared:
     frame_ok: NDArray[np.bool_]
     has_ball: bool
     latency0: float
+    rho: FloatArray | None = None
+    ball_xy: FloatArray | None = None
+    frame_held: bool = False
     noise: dict[str, float] = field(default_factory=dict)
     info: dict[str, Any] = field(default_factory=dict)
     fixes: _Fixes | None = None
-    _offset_cache: dict = field(default_factory=dict, repr=False)
 
     @property
     def n(self) -> int:
         """Number of grid samples."""
         return int(self.t.size)
 
-    def psi_for(self, sensor: SensorCorrection | None = None
-                ) -> tuple[FloatArray, FloatArray]:
-        """World ball angle and rate [rad, rad/s] under a camera correction.
+    def ball_for(self, sensor: SensorCorrection | None = None
+                 ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """World ball angle, its rate and the ball's distance under a sensor correction.
 
-        Offset: the fixes' angle ``atan2(x - c_x, y - c_y)`` is re-interpolated and
-        re-smoothed exactly (the last offset is cached). Latency: a fix that is ``dL`` later
-        than assumed shows the ball at ``t - dL``; the corrected angle at t is the smoothed
-        angle at ``t + dL`` (linear interpolation of a smooth signal).
+        The smoothed position minus the offset gives the angle ``atan2(x - c_x, y - c_y)``
+        plus the rotation, its rate, and the distance over the scale. Latency: a fix that is
+        ``dL`` later than assumed shows the ball at ``t - dL``; the corrected signals at t
+        are the smoothed ones at ``t + dL`` (linear interpolation of smooth signals).
+
+        Returns
+        -------
+        psi_w, psi_w_dot, rho : ndarray
+            [rad], [rad/s], [m] on the grid (NaN outside ball segments).
         """
         sensor = sensor or SensorCorrection()
         psi, psid = self.psi_w, self.psi_w_dot
-        if sensor.has_offset and self.fixes is not None:
-            key = (sensor.offset_x, sensor.offset_y)
-            hit = self._offset_cache.get(key)
-            if hit is None:
-                hit = _smooth_ball(self.fixes, self.t, *key)
-                self._offset_cache.clear()
-                self._offset_cache[key] = hit
-            psi, psid = hit
+        rho = self.rho if self.rho is not None else np.full(self.n, np.nan)
+        if sensor.has_offset and self.ball_xy is not None:
+            bx, by, bxd, byd = self.ball_xy
+            x, y = bx - sensor.offset_x, by - sensor.offset_y
+            rho = np.hypot(x, y)
+            psi = _world_angle(x, y)
+            psid = (y * bxd - x * byd) / (rho * rho)
+        if sensor.rotation != 0.0:
+            psi = psi + sensor.rotation
+        if sensor.scale != 1.0:
+            rho = rho / sensor.scale
         if sensor.latency == 0.0:
-            return psi, psid
+            return psi, psid, rho
         ts = self.t + sensor.latency
-        return np.interp(ts, self.t, psi), np.interp(ts, self.t, psid)
+        return (np.interp(ts, self.t, psi), np.interp(ts, self.t, psid),
+                np.interp(ts, self.t, rho))
+
+    def psi_for(self, sensor: SensorCorrection | None = None
+                ) -> tuple[FloatArray, FloatArray]:
+        """World ball angle and rate [rad, rad/s] under a sensor correction (:meth:`ball_for`)."""
+        return self.ball_for(sensor)[:2]
 
     def psi_shifted(self, extra_latency: float) -> tuple[FloatArray, FloatArray]:
         """World ball angle and rate with the camera ``extra_latency`` [s] more than latency0."""
         return self.psi_for(SensorCorrection(latency=extra_latency))
+
+    def u_for(self, sensor: SensorCorrection | None = None) -> FloatArray:
+        """The torque acting at each grid time [N m]: ``u(t - torque_delay)``."""
+        d = 0.0 if sensor is None else sensor.torque_delay
+        if d == 0.0:
+            return self.u
+        return np.interp(self.t - d, self.t, self.u)
 
 
 def _odd(n: float) -> int:
@@ -275,19 +357,29 @@ def _cell_average_zoh(t: FloatArray, u: FloatArray, tg: FloatArray) -> FloatArra
     return out
 
 
+def _spline(t: FloatArray, y: FloatArray, at: FloatArray) -> FloatArray:
+    """``y(t)`` at ``at`` by a cubic spline (not-a-knot), held constant beyond the ends."""
+    if t.size < 4:
+        return np.interp(at, t, y)
+    return CubicSpline(t, y)(np.clip(at, t[0], t[-1]))
+
+
 def _antialiased(t: FloatArray, y: FloatArray, tg: FloatArray, width: float,
                  hold: bool) -> FloatArray:
     """``y`` on the grid ``tg`` after a zero-phase Hann low-pass of ``width`` [s].
 
-    The signal is first put on a grid 4x finer than ``tg`` (linear interpolation, or cell
-    means for a held command), filtered there and decimated. Both the angle and the torque
+    The signal is first put on a grid 4x finer than ``tg`` (a cubic spline through the
+    samples, or cell means for a held command), filtered there and decimated. A straight
+    line between samples would bend the signal by ``-y'' h^2 / 12`` on average over an
+    interval h: at 150 samples per second a bias of the frame's acceleration that looked
+    like a torque gain; the spline's error is of fourth order. Both the angle and the torque
     go through this same filter, so the quadrature of the equation error on the coarse grid
     sees no content above its resolution (the command of a fast loop changes every step).
     """
     dt = float(tg[1] - tg[0])
     sub = 4
     tf = tg[0] + (dt / sub) * np.arange((tg.size - 1) * sub + 1)
-    yf = _cell_average_zoh(t, y, tf) if hold else np.interp(tf, t, y)
+    yf = _cell_average_zoh(t, y, tf) if hold else _spline(t, y, tf)
     k = max(round(width / (dt / sub) / 2.0), 1)
     w = np.hanning(2 * k + 3)[1:-1]
     w /= w.sum()
@@ -295,10 +387,14 @@ def _antialiased(t: FloatArray, y: FloatArray, tg: FloatArray, width: float,
     return np.convolve(pad, w, mode="valid")[::sub]
 
 
-def _coarse_theta(rec: Recording, tg: FloatArray, cfg: PrepConfig,
-                  delay: float) -> tuple[FloatArray, FloatArray]:
-    """Fuse a coarse theta with the logged velocity (complementary filter)."""
-    thd = np.interp(tg + delay, rec.t, rec.theta_dot)
+def _coarse_theta(rec: Recording, tg: FloatArray, cfg: PrepConfig, delay: float,
+                  c2: float = 0.0) -> tuple[FloatArray, FloatArray]:
+    """Fuse a coarse theta with the logged velocity (complementary filter).
+
+    The velocity is first corrected for its filter: advanced by its lag, plus its
+    second-order term (:func:`bfr_model.io.timing.corrected_velocity`).
+    """
+    thd = corrected_velocity(rec.t, rec.theta_dot, tg, delay, c2)
     th_q = np.interp(tg, rec.t, rec.theta)
     integ = np.concatenate([[0.0], np.cumsum(0.5 * (thd[1:] + thd[:-1]) * np.diff(tg))])
     diff = th_q - integ
@@ -310,17 +406,83 @@ def _coarse_theta(rec: Recording, tg: FloatArray, cfg: PrepConfig,
     return integ + low, thd
 
 
-def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0) -> Prepared:
+def _adapted(cfg: PrepConfig, rec: Recording) -> PrepConfig:
+    """The filter widths for this recording's sampling, times ``width_factor``.
+
+    A filter must span its samples: the anti-alias filter (one for the angle, the torque
+    and the ball) at least two intervals of the lines and of the camera's fixes, the
+    Savitzky-Golay windows at least five (a log at 150 lines per second with the widths of a
+    1-kHz log fitted cubics through three samples of a linear interpolation, a bias that
+    looked like a torque gain).
+    """
+    line = float(np.median(np.diff(rec.t))) if rec.n > 1 else cfg.dt
+    ft = rec.fix_times()
+    fix = float(np.median(np.diff(ft))) if ft.size > 2 else line
+    f = cfg.width_factor
+    return replace(cfg, antialias=f * max(cfg.antialias, 2.0 * line, 2.0 * fix),
+                   sg_theta=f * max(cfg.sg_theta, 5.0 * line),
+                   sg_ball=f * max(cfg.sg_ball, 5.0 * fix), width_factor=1.0)
+
+
+def split_pieces(rec: Recording, cfg: PrepConfig | None = None
+                 ) -> tuple[list[Recording], list[str]]:
+    """Cut a recording where its samples stop for longer than ``max_line_gap``.
+
+    A logger that stalled, a bag with a dropout, a stray first line long before the run
+    (the NTNU ``rolling_data`` log opens with a line at t = 0, the next at 4.1 s): each side
+    is preprocessed on its own. Pieces shorter than ``2 edge + min_segment`` are dropped.
+
+    Returns
+    -------
+    pieces : list of Recording
+        The usable pieces, in time order.
+    notes : list of str
+        What was cut and dropped.
+    """
+    cfg = cfg or PrepConfig()
+    notes: list[str] = []
+    if rec.n < 2:
+        return [], [f"{rec.n} sample(s): nothing to diagnose"]
+    dt = np.diff(rec.t)
+    limit = max(cfg.max_line_gap, 20.0 * float(np.median(dt)))
+    cuts = np.nonzero(dt > limit)[0]
+    bounds = np.concatenate([[0], cuts + 1, [rec.n]])
+    need = 2.0 * cfg.edge + cfg.min_segment
+    pieces = []
+    for a, b in itertools.pairwise(bounds):
+        part = rec if (a, b) == (0, rec.n) else rec.slice_time(float(rec.t[a]),
+                                                               float(rec.t[b - 1]))
+        if b - a < 50 or part.duration < need:
+            notes.append(f"samples {a}-{b - 1} (t = {rec.t[a]:.3f}-{rec.t[b - 1]:.3f} s, "
+                         f"{b - a} sample(s)) dropped: shorter than {need:.2g} s")
+            continue
+        pieces.append(part)
+    if cuts.size:
+        notes.append(f"cut at {cuts.size} gap(s) in the samples longer than {limit * 1e3:.0f} "
+                     f"ms (longest {dt[cuts].max():.3g} s)")
+    return pieces, notes
+
+
+def frame_held(rec: Recording, resolution: float) -> bool:
+    """Whether the frame did not turn: theta spans at most 3 encoder steps (or 2 mrad)."""
+    return bool(np.ptp(rec.theta) <= max(3.0 * resolution, 2e-3))
+
+
+def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0,
+            held: bool | None = None) -> Prepared:
     """Smooth and differentiate a recording onto a uniform grid (module docstring).
 
     Parameters
     ----------
     rec : Recording
-        The recording (our conventions).
+        The recording (our conventions), without long gaps (:func:`split_pieces`).
     cfg : PrepConfig, optional
         Settings.
     latency0 : float
         Nominal camera latency [s]: fixes are placed at ``t_fix - latency0``.
+    held : bool, optional
+        Whether the frame is held (default: :func:`frame_held`; the null passes the
+        original's decision to its noisy copies).
 
     Raises
     ------
@@ -332,18 +494,33 @@ def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0
         raise DiagnoseError(f"recording too short to diagnose: {rec.n} samples, "
                             f"{rec.duration:.3g} s (need at least "
                             f"{2 * cfg.edge + cfg.min_segment:.2g} s)")
+    cfg = _adapted(cfg, rec)
     dt = cfg.dt
     tg = rec.t[0] + dt * np.arange(int(np.floor(rec.duration / dt)) + 1)
-    info: dict[str, Any] = {"grid_dt": dt}
+    info: dict[str, Any] = {"grid_dt": dt, "filters_s": {"antialias": cfg.antialias,
+                                                        "sg_theta": cfg.sg_theta,
+                                                        "sg_ball": cfg.sg_ball}}
     noise_thd = _velocity_noise(rec, tg, dt)
     res = _theta_resolution(rec)
     info["theta_resolution"] = float(res)
     info["theta_coarse"] = bool(res > cfg.coarse_theta)
-    frame = _frame_angle(rec, tg, cfg, res)
-    info["theta_source"] = frame.source
-    u = _torque(rec, tg, cfg)
     ball = _ball(rec, tg, cfg, latency0)
     info["ball"] = ball.note
+    held = ball.has_ball and (frame_held(rec, res) if held is None else held)
+    if held:
+        # the frame does not turn: its angle is constant, its rates zero
+        th0 = float(np.median(rec.theta))
+        frame = _FrameAngle(theta=np.full(tg.size, th0), theta_dot=np.zeros(tg.size),
+                            theta_ddot=np.zeros(tg.size), noise=float(res) / np.sqrt(12.0),
+                            source=f"frame held at theta = {th0:.4f} rad (it spans "
+                                   f"{np.ptp(rec.theta):.2g} rad): ball rows only",
+                            lag=None)
+    else:
+        frame = _frame_angle(rec, tg, cfg, res)
+    info["theta_source"] = frame.source
+    if frame.lag is not None:
+        info["velocity_lag"] = frame.lag
+    u = _torque(rec, tg, cfg)
     frame_ok = np.zeros(tg.size, bool)
     n_edge = round(cfg.edge / dt)
     frame_ok[n_edge:tg.size - n_edge] = True
@@ -354,8 +531,9 @@ def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0
         raise DiagnoseError("no usable segment after dropping edges and ball gaps")
     return Prepared(t=tg, theta=frame.theta, theta_dot=frame.theta_dot,
                     theta_ddot=frame.theta_ddot, u=u, psi_w=ball.psi_w,
-                    psi_w_dot=ball.psi_w_dot, ball_ok=ball.ok, frame_ok=frame_ok,
-                    has_ball=ball.has_ball, latency0=latency0,
+                    psi_w_dot=ball.psi_w_dot, rho=ball.rho, ball_xy=ball.xy, ball_ok=ball.ok,
+                    frame_ok=frame_ok, has_ball=ball.has_ball, frame_held=bool(held),
+                    latency0=latency0,
                     noise={"camera": ball.noise, "theta": frame.noise,
                            "theta_dot": noise_thd}, info=info, fixes=ball.fixes)
 
@@ -385,6 +563,7 @@ class _FrameAngle:
     theta_ddot: FloatArray    # [rad/s^2]
     noise: float              # [rad] noise of the raw angle
     source: str               # what was done (for the report)
+    lag: dict | None          # the logged velocity's measured lag (when it is used)
 
 
 def _frame_angle(rec: Recording, tg: FloatArray, cfg: PrepConfig, res: float) -> _FrameAngle:
@@ -398,22 +577,28 @@ def _frame_angle(rec: Recording, tg: FloatArray, cfg: PrepConfig, res: float) ->
     dt = cfg.dt
     win = _odd(cfg.sg_theta / dt)
     if res > cfg.coarse_theta:
-        delay = cfg.dtheta_delay
-        if delay is None:
-            delay = float(rec.meta.get("rig_conventions", {}).get("dtheta_delay_s", 0.0))
-        theta, thd = _coarse_theta(rec, tg, cfg, delay)
+        if cfg.dtheta_delay is None:
+            vl = velocity_lag(rec.t, rec.theta, rec.theta_dot)
+            lag = {**vl.to_json(), "how": "measured on this recording"}
+            delay, c2 = vl.lag, vl.c2
+        else:
+            delay, c2 = float(cfg.dtheta_delay), float(cfg.dtheta_c2)
+            lag = {"lag_s": delay, "c2_s2": c2,
+                   "how": "given (--velocity-lag or the null's copy)"}
+        theta, thd = _coarse_theta(rec, tg, cfg, delay, c2)
         return _FrameAngle(
             theta=theta, theta_dot=savgol_filter(thd, win, cfg.sg_order),
             theta_ddot=savgol_filter(thd, win, cfg.sg_order, deriv=1, delta=dt),
-            noise=float(res) / np.sqrt(12.0),
-            source=(f"logged velocity advanced by {delay * 1e3:.1f} ms, integrated "
-                    f"and fused with the coarse angle (resolution {res:.2g} rad)"))
+            noise=float(res) / np.sqrt(12.0), lag=lag,
+            source=(f"logged velocity advanced by {delay * 1e3:.2f} ms (its lag, "
+                    f"{lag['how']}), integrated and fused with the coarse angle "
+                    f"(resolution {res:.2g} rad)"))
     th = _antialiased(rec.t, rec.theta, tg, cfg.antialias, hold=False)
     theta = savgol_filter(th, win, cfg.sg_order)
     return _FrameAngle(
         theta=theta, theta_dot=savgol_filter(th, win, cfg.sg_order, deriv=1, delta=dt),
         theta_ddot=savgol_filter(th, win, cfg.sg_order, deriv=2, delta=dt),
-        noise=float(np.std(th - theta)),
+        noise=float(np.std(th - theta)), lag=None,
         source=f"encoder angle (resolution {res:.2g} rad), Savitzky-Golay")
 
 
@@ -434,6 +619,8 @@ class _Ball:
     has_ball: bool                 # whether the ball rows apply
     psi_w: FloatArray              # [rad] (NaN outside the fixes' segments)
     psi_w_dot: FloatArray          # [rad/s]
+    rho: FloatArray                # [m] distance from the shaft as the camera reports it
+    xy: FloatArray | None          # (4, n): smoothed x, y [m], x_dot, y_dot [m/s]
     ok: NDArray[np.bool_]          # grid samples inside a usable segment (edges dropped)
     noise: float                   # [m] camera noise per axis (NaN if not estimated)
     fixes: _Fixes | None           # the raw fixes (only when the ball rows apply)
@@ -458,31 +645,38 @@ def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _
                     f"{rec.duration:.1f} s; frame-only analysis (row 1, ball terms off)")
         else:
             note = "no ball in the recording: frame-only analysis (row 1, ball terms off)"
-        return _Ball(has_ball=False, psi_w=np.full(tg.size, np.nan),
-                     psi_w_dot=np.full(tg.size, np.nan), ok=np.zeros(tg.size, bool),
-                     noise=float("nan"), fixes=None, note=note)
+        nan = np.full(tg.size, np.nan)
+        return _Ball(has_ball=False, psi_w=nan, psi_w_dot=nan.copy(), rho=nan.copy(), xy=None,
+                     ok=np.zeros(tg.size, bool), noise=float("nan"), fixes=None, note=note)
     fixes, ball_ok = _ball_fixes(rec, nfix, tg, cfg, latency0)
-    psi_w, psi_wd = _smooth_ball(fixes, tg, 0.0, 0.0)
+    bxy = np.vstack(_smooth_ball(fixes, tg))
+    psi_w = _world_angle(bxy[0], bxy[1])
+    rho = np.hypot(bxy[0], bxy[1])
+    psi_wd = (bxy[1] * bxy[2] - bxy[0] * bxy[3]) / (rho * rho)
     noise_cam = fix_noise(fixes.tf, fixes.x, fixes.y, cfg.max_gap)
     if not ball_ok.any():
         if cfg.ball == "yes":
             raise DiagnoseError("no usable ball segment (need "
                                 f"{cfg.min_segment + 2 * cfg.edge:.2g} s of fixes with "
                                 f"gaps under {cfg.max_gap * 1e3:.0f} ms)")
-        return _Ball(has_ball=False, psi_w=psi_w, psi_w_dot=psi_wd, ok=ball_ok,
-                     noise=noise_cam, fixes=None,
+        return _Ball(has_ball=False, psi_w=psi_w, psi_w_dot=psi_wd, rho=rho, xy=None,
+                     ok=ball_ok, noise=noise_cam, fixes=None,
                      note="no usable ball segment: frame-only analysis")
-    return _Ball(has_ball=True, psi_w=psi_w, psi_w_dot=psi_wd, ok=ball_ok, noise=noise_cam,
-                 fixes=fixes, note=(f"{len(segments_from_mask(ball_ok))} ball segment(s), "
-                                    f"{ball_ok.mean() * 100:.0f} % of the run"))
+    return _Ball(has_ball=True, psi_w=psi_w, psi_w_dot=psi_wd, rho=rho, xy=bxy, ok=ball_ok,
+                 noise=noise_cam, fixes=fixes,
+                 note=(f"{len(segments_from_mask(ball_ok))} ball segment(s), "
+                       f"{ball_ok.mean() * 100:.0f} % of the run; {int(nfix.sum())} fixes "
+                       f"({rec.camera_fix_rate():.0f} per second)"))
 
 
 def _ball_fixes(rec: Recording, nfix: NDArray[np.bool_], tg: FloatArray, cfg: PrepConfig,
                 latency0: float) -> tuple[_Fixes, NDArray[np.bool_]]:
     """The distinct fixes, placed at ``t_fix - latency0`` and cut into segments at gaps.
 
-    A segment needs 10 fixes, ``min_segment + 2 edge`` seconds and more grid samples than
-    the Savitzky-Golay window; its first and last ``edge`` seconds are not usable.
+    ``t_fix`` is the fix's own stamp when the source has one, else its line's time
+    (:meth:`bfr_model.recording.Recording.fix_times`). A segment needs 10 fixes,
+    ``min_segment + 2 edge`` seconds and more grid samples than the Savitzky-Golay window;
+    its first and last ``edge`` seconds are not usable.
 
     Returns
     -------
@@ -493,7 +687,7 @@ def _ball_fixes(rec: Recording, nfix: NDArray[np.bool_], tg: FloatArray, cfg: Pr
     """
     dt = cfg.dt
     n_edge = round(cfg.edge / dt)
-    tf = rec.t[nfix] - latency0
+    tf = rec.fix_times() - latency0
     # segments between gaps
     gaps = np.nonzero(np.diff(tf) > cfg.max_gap)[0]
     bounds = np.concatenate([[0], gaps + 1, [tf.size]])
@@ -528,11 +722,14 @@ def stitch(preps: list[Prepared], gap: float = 0.6) -> Prepared:
     dt = float(preps[0].t[1] - preps[0].t[0])
     ng = max(round(gap / dt), 1)
     has_ball = all(p.has_ball for p in preps)
-    if not has_ball and any(p.has_ball for p in preps):
-        raise DiagnoseError("cannot diagnose runs with and without ball data together "
-                            "(choose one run with --run)")
+    held = all(p.frame_held for p in preps)
+    if (not has_ball and any(p.has_ball for p in preps)) or (
+            not held and any(p.frame_held for p in preps)):
+        raise DiagnoseError("cannot stitch runs of different kinds (ball or not, frame held "
+                            "or not): prepare them as separate parts")
     parts: dict[str, list[FloatArray]] = {k: [] for k in (
-        "theta", "theta_dot", "theta_ddot", "u", "psi_w", "psi_w_dot", "ball_ok", "frame_ok")}
+        "theta", "theta_dot", "theta_ddot", "u", "psi_w", "psi_w_dot", "rho", "ball_ok",
+        "frame_ok", "bx", "by", "bxd", "byd")}
     fx_t, fx_x, fx_y, segs = [], [], [], []
     n0 = 0
     nf0 = 0
@@ -545,7 +742,7 @@ def stitch(preps: list[Prepared], gap: float = 0.6) -> Prepared:
             for name, lst in parts.items():
                 if name in ("ball_ok", "frame_ok"):
                     lst.append(np.zeros(ng, bool))
-                elif name in ("psi_w", "psi_w_dot"):
+                elif name in ("psi_w", "psi_w_dot", "rho", "bx", "by", "bxd", "byd"):
                     lst.append(np.full(ng, np.nan))
                 else:
                     lst.append(np.full(ng, lst[-1][-1]))
@@ -558,6 +755,10 @@ def stitch(preps: list[Prepared], gap: float = 0.6) -> Prepared:
         parts["u"].append(p.u)
         parts["psi_w"].append(p.psi_w)
         parts["psi_w_dot"].append(p.psi_w_dot)
+        parts["rho"].append(p.rho if p.rho is not None else np.full(p.n, np.nan))
+        xy = p.ball_xy if p.ball_xy is not None else np.full((4, p.n), np.nan)
+        for j, key in enumerate(("bx", "by", "bxd", "byd")):
+            parts[key].append(xy[j])
         parts["ball_ok"].append(p.ball_ok & has_ball)
         parts["frame_ok"].append(p.frame_ok if not has_ball else p.frame_ok & p.ball_ok)
         if has_ball and p.fixes is not None:
@@ -582,16 +783,113 @@ def stitch(preps: list[Prepared], gap: float = 0.6) -> Prepared:
     info["runs"] = runs
     info["ball"] = (f"{len(preps)} runs stitched ({gap:.1f} s unusable gaps); "
                     + str(preps[0].info.get("ball")))
+    lags = [p.info["velocity_lag"] for p in preps if "velocity_lag" in p.info]
+    if lags:
+        info["velocity_lag_runs"] = lags
     if not has_ball:
         cat["ball_ok"][:] = False
     return Prepared(t=t, theta=cat["theta"], theta_dot=cat["theta_dot"],
                     theta_ddot=cat["theta_ddot"], u=cat["u"], psi_w=cat["psi_w"],
-                    psi_w_dot=cat["psi_w_dot"], ball_ok=cat["ball_ok"],
-                    frame_ok=cat["frame_ok"], has_ball=has_ball, latency0=preps[0].latency0,
-                    noise=noise, info=info, fixes=fixes)
+                    psi_w_dot=cat["psi_w_dot"], rho=cat["rho"],
+                    ball_xy=np.vstack([cat[k] for k in ("bx", "by", "bxd", "byd")]),
+                    ball_ok=cat["ball_ok"],
+                    frame_ok=cat["frame_ok"], has_ball=has_ball, frame_held=held,
+                    latency0=preps[0].latency0, noise=noise, info=info, fixes=fixes)
 
 
 def prepare_runs(recs: list[Recording], cfg: PrepConfig | None = None,
-                 latency0: float = 0.0) -> Prepared:
+                 latency0: float = 0.0, held: bool | None = None) -> Prepared:
     """:func:`prepare` each run, then :func:`stitch` them (one run: just :func:`prepare`)."""
-    return stitch([prepare(r, cfg, latency0=latency0) for r in recs])
+    return stitch([prepare(r, cfg, latency0=latency0, held=held) for r in recs])
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class Piece:
+    """One continuous piece of a recording and the decisions its preprocessing made.
+
+    The noise-only null prepares noisy copies of the same pieces with the same decisions
+    (:func:`prepare_pieces`), so that only the noise differs.
+
+    Attributes
+    ----------
+    rec : Recording
+        The piece (:func:`split_pieces`).
+    held : bool
+        Whether its frame is held.
+    lag : float or None
+        The logged velocity's lag used [s] (None: a fine encoder, the velocity unused).
+    c2 : float
+        The logged velocity's second-order term used [s^2].
+    """
+
+    rec: Recording
+    held: bool
+    lag: float | None
+    c2: float = 0.0
+
+
+def prepare_pieces(pieces: list[Piece], cfg: PrepConfig | None = None,
+                   latency0: float = 0.0, recs: list[Recording] | None = None) -> Prepared:
+    """Prepare pieces with their recorded decisions and stitch them (one kind).
+
+    ``recs`` replaces the pieces' recordings (the null's noisy copies).
+    """
+    cfg = cfg or PrepConfig()
+    out = []
+    for pc, rec in zip(pieces, recs or [pc.rec for pc in pieces], strict=True):
+        c = cfg if pc.lag is None else replace(cfg, dtheta_delay=pc.lag, dtheta_c2=pc.c2)
+        out.append(prepare(rec, c, latency0=latency0, held=pc.held))
+    return stitch(out)
+
+
+def _kind(p: Prepared) -> str:
+    if not p.has_ball:
+        return "frame only"
+    return "frame held" if p.frame_held else "rolling"
+
+
+def plan_parts(runs: list[Recording], cfg: PrepConfig | None = None, latency0: float = 0.0
+               ) -> tuple[list[tuple[str, list[Piece], Prepared]], list[str]]:
+    """The runs of one recording, cut into pieces, prepared and stitched by kind.
+
+    Every run is cut at gaps (:func:`split_pieces`); each usable piece is prepared alone;
+    pieces of one kind (rolling ball, frame held, frame only) are stitched into one part.
+    What was dropped, and why, is in the notes: nothing is lost silently.
+
+    Returns
+    -------
+    parts : list of (kind, pieces, Prepared)
+        One per kind present, in the order rolling, frame held, frame only.
+    notes : list of str
+        Cuts and dropped runs or pieces.
+
+    Raises
+    ------
+    DiagnoseError
+        No usable piece at all.
+    """
+    cfg = cfg or PrepConfig()
+    notes: list[str] = []
+    groups: dict[str, list[tuple[Piece, Prepared]]] = {}
+    for k, run in enumerate(runs):
+        pieces, why = split_pieces(run, cfg)
+        tag = f"run {k}: " if len(runs) > 1 else ""
+        notes += [tag + w for w in why]
+        for rec in pieces:
+            try:
+                p = prepare(rec, cfg, latency0=latency0)
+            except DiagnoseError as exc:
+                notes.append(f"{tag}a piece of {rec.duration:.2f} s dropped: {exc}")
+                continue
+            vl = p.info.get("velocity_lag", {})
+            groups.setdefault(_kind(p), []).append(
+                (Piece(rec=rec, held=p.frame_held, lag=vl.get("lag_s"),
+                       c2=float(vl.get("c2_s2") or 0.0)), p))
+    if not groups:
+        raise DiagnoseError("no usable data: " + ("; ".join(notes) or "every run too short"))
+    out = []
+    for kind in ("rolling", "frame held", "frame only"):
+        if kind in groups:
+            pieces = [pc for pc, _ in groups[kind]]
+            out.append((kind, pieces, stitch([p for _, p in groups[kind]])))
+    return out, notes

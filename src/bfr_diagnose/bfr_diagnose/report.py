@@ -2,6 +2,10 @@
 
 Everything is written into a temporary directory next to ``out_dir`` and moved into place
 only when complete, so a failure never leaves half-written results over earlier ones.
+
+Files: ``report.md``, ``diagnosis.json``, ``corrected_params.yaml`` (the plausible physics
+only: a suspect never goes into it), ``sensor_model.yaml`` (each recording's measured sensor
+timing and camera extrinsics; never physics), and figures (:func:`_plots`).
 """
 
 from __future__ import annotations
@@ -11,6 +15,7 @@ import math
 import os
 import shutil
 import tempfile
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -18,10 +23,21 @@ from typing import Any
 import numpy as np
 from bfr_model.params import params_to_ros_yaml
 
-from bfr_diagnose.api import Diagnosis
-from bfr_diagnose.effects import DESTINATION, EFFECTS, SENSOR_EFFECTS, display_values
+from bfr_diagnose.api import Diagnosis, PartResult
+from bfr_diagnose.effects import DESTINATION, EFFECTS, display_values
+from bfr_diagnose.synth import SynthConfig, stabilised_recording
 
-__all__ = ["camera_yaml", "corrected_yaml", "format_text", "write_outputs"]
+__all__ = ["corrected_yaml", "format_text", "phi_dot_profiles", "sensor_yaml",
+           "write_outputs"]
+
+_UNITS = {"theta": "rad", "theta_dot": "rad/s", "ball_angle": "rad"}
+
+
+def _used(row: dict[str, Any]) -> str:
+    """'yes', or 'no' with the reason a per-recording value was left out of the joint one."""
+    if row.get("used"):
+        return "yes"
+    return "no" + (": " + row["degenerate"] if row.get("degenerate") else "")
 
 
 def _num(x: Any, fmt: str = ".4g") -> str:
@@ -30,222 +46,323 @@ def _num(x: Any, fmt: str = ".4g") -> str:
     return format(x, fmt)
 
 
+def _sources(s: dict[str, Any]) -> str:
+    src = s["source"]
+    return ", ".join(Path(str(x)).name for x in src) if isinstance(src, list) else \
+        Path(str(src)).name
+
+
 def corrected_yaml(d: Diagnosis) -> str:
-    """The corrected parameter file (loads with ``load_params``; simulator node format)."""
+    """The corrected parameter file (loads with ``load_params``; simulator node format).
+
+    The nominal parameters with the plausible effects only; suspects are listed in the
+    header and left out.
+    """
     s = d.summary
     lines = [
         "Corrected Butterfly rig parameters written by bfr diagnose.",
-        f"Recording: {s['source']} ({s['duration']:.1f} s).",
-        f"Fitted effects: {', '.join(s['effects']) or 'none (nominal model kept)'}.",
+        f"Recordings: {_sources(s)} ({s['duration']:.1f} s).",
+        f"Effects applied: {', '.join(s['effects']) or 'none (nominal model kept)'}.",
     ]
     for p in s["parameters"]:
-        lines.append(f"  {p['effect']}.{p['name']} = {p['value']:.6g} {p['unit']} "
-                     f"(95 % CI {p['ci95'][0]:.4g} .. {p['ci95'][1]:.4g})"
-                     + ("" if p.get("plausible", True) else " IMPLAUSIBLE: see report.md"))
+        if p.get("plausible", True):
+            lines.append(f"  {p['effect']}.{p['name']} = {p['value']:.6g} {p['unit']} "
+                         f"(95 % CI {p['ci95'][0]:.4g} .. {p['ci95'][1]:.4g})")
+    for name, why in s["suspects"].items():
+        lines.append(f"NOT applied (suspect, physically implausible): {name}: {why}.")
     for c in s["confounded"]:
-        if c.get("kind") != "degenerate":
+        if c.get("kind") in ("pair", "sensor"):
             lines.append(f"Confounded: {' / '.join(c['effects'])} (only a combination is "
                          "identified).")
-    sensor = [n for n in s["effects"] if n in SENSOR_EFFECTS]
-    if sensor:
-        lines.append(f"Sensor corrections fitted ({', '.join(sensor)}): see "
-                     "camera_correction.yaml (camera parameters, not physics; not in this file).")
-    return params_to_ros_yaml(d.selection.params, "\n".join(lines))
+    lines.append("Sensor timing and camera extrinsics are in sensor_model.yaml (not physics).")
+    return params_to_ros_yaml(d.corrected, "\n".join(lines))
 
 
-def camera_yaml(d: Diagnosis) -> str:
-    """The fitted camera corrections (latency, origin offset) as a ROS 2 parameter file.
+def sensor_yaml(d: Diagnosis) -> str:
+    """Each recording's measured sensor model (timing, camera extrinsics) as YAML.
 
-    They describe the sensor, not the rig's physics, so they never enter rig.yaml.
+    They describe the sensors of one recording, not the rig's physics, so they never
+    enter rig.yaml.
     """
-    lat = d.summary["camera_latency"]
-    off = d.summary["camera_offset"]
-    return (
-        "# Camera corrections fitted by bfr diagnose: the sensor model, not physics (rig.yaml\n"
-        "# is unchanged by them). Fitted: "
-        f"latency {'yes' if lat['fitted'] else 'no'}, offset {'yes' if off['fitted'] else 'no'}."
-        "\n/**:\n  ros__parameters:\n    camera:\n"
-        f"      latency: {lat['fitted_total']:.6g}   # [s] age of the image when its fix "
-        f"arrives (nominal {lat['nominal']:.6g})\n"
-        f"      origin_offset: [{off['x']:.6g}, {off['y']:.6g}]   # [m] the camera reports "
-        "(x, y) = true + origin_offset;\n"
-        "      # subtract it from the fixes (bfr_model.io.rig_log: camera_offset=(x, y)); for a\n"
-        "      # camera looking along -z it is camera.position -= [x, y, 0] in camera.yaml\n")
+    s = d.summary
+    out = ["# Sensor model of each recording, measured by bfr diagnose (not physics: rig.yaml",
+           "# is unchanged by it). The camera logs (x, y) = scale Rot(rotation) true + offset;",
+           "# a fix is latency_total old when it arrives; the true frame angle is the logged",
+           "# one + theta_zero; the drive applies a logged torque torque_delay later; the",
+           "# logged velocity lags the angle's rate by velocity_lag.", "recordings:"]
+    lat0 = s["options"]["latency0"]
+    for pr in d.parts:
+        out.append(f"  - name: {json.dumps(pr.name)}")
+        out.append(f"    kind: {pr.kind}")
+        vals = {r["name"]: r for r in s["sensor_timing"] if r["recording"] == pr.name}
+        for name, r in vals.items():
+            v = r["value"] + (lat0 if name == "latency" else 0.0)
+            key = "latency_total" if name == "latency" else name
+            out.append(f"    {key}: {v:.6g}   # [{r['unit']}] 95 % CI "
+                       f"{_num(r['ci95'][0] + (lat0 if name == 'latency' else 0.0))} .. "
+                       f"{_num(r['ci95'][1] + (lat0 if name == 'latency' else 0.0))}")
+        lag = pr.prep.info.get("velocity_lag")
+        if lag is not None:
+            out.append(f"    velocity_lag: {lag['lag_s']:.6g}   # [s] {lag.get('how', '')}")
+    return "\n".join(out) + "\n"
 
 
 def format_text(s: dict[str, Any]) -> str:
     """Short human-readable summary for the terminal."""
-    out = [f"bfr diagnose: {s['source']} ({s['duration']:.1f} s, "
-           f"{'with ball' if s['has_ball'] else 'frame only'})",
+    out = [f"bfr diagnose: {_sources(s)} ({s['duration']:.1f} s)",
            f"verdict: {s['verdict']}"]
     out += [f"note: {n}" for n in s.get("notes", [])]
     for p in s["parameters"]:
         out.append(f"  {p['effect']:24s} {p['name']:6s} = {p['value']:.5g} {p['unit']} "
                    f"[{p['ci95'][0]:.4g}, {p['ci95'][1]:.4g}]"
-                   + ("" if p.get("plausible", True) else "  (implausible, see note)"))
+                   + ("" if p.get("plausible", True) else "  (suspect: implausible)"))
+    for j in s.get("between_recordings", {}).get("joint", []):
+        if j["recordings_used"] >= 2:
+            out.append(f"  {j['effect']}.{j['name']}: between-recording sd {j['tau']:.3g}, "
+                       f"interval with it [{j['ci95'][0]:.4g}, {j['ci95'][1]:.4g}] "
+                       f"({j['recordings_used']} recordings)")
     for c in s["confounded"]:
-        out.append(f"  {'degenerate' if c.get('kind') == 'degenerate' else 'confounded'}: "
-                   f"{c['note']}")
-    m = s["metrics"]
-    h = m["heldout_rmse_over_noise"]
-    out.append(f"held-out equation error / noise: {h['before']:.3g} -> {h['after']:.3g} "
-               f"(x{h['improvement_factor']:.2f})")
-    for row, v in m["heldout_before"].items():
-        a = m["heldout_after"][row]
-        out.append(f"  {row:18s} RMSE {v['rmse']:.3g} -> {a['rmse']:.3g} N m; Ljung-Box p "
-                   f"{_num(v['whiteness']['p_value'], '.2g')} -> "
-                   f"{_num(a['whiteness']['p_value'], '.2g')}")
-    pb, pa = m["prediction_before"]["rmse"], m["prediction_after"]["rmse"]
-    out.append("  prediction RMSE (" + f"{m['prediction_before']['horizon'] * 1e3:.0f} ms): "
-               + ", ".join(f"{k} {_num(pb[k], '.3g')} -> {_num(pa[k], '.3g')}" for k in pb))
-    loc = s["located"]
-    out.append(f"located: {len(loc['windows'])} of {loc['n_windows']} windows exceed the "
-               "noise; regions: " + ("; ".join(r["region"] for r in loc["regions"][:4])
-                                    or "none"))
+        out.append(f"  {c.get('kind')}: {c['note']}")
+    out.append("sensor model (per recording):")
+    for r in s["sensor_timing"]:
+        out.append(f"  {Path(r['recording']).name[:40]:40s} {r['name']:12s} {r['value']:.5g} "
+                   f"{r['unit']}")
+    for rec in s["recordings"]:
+        m = rec["metrics"]
+        h = m["heldout_rmse_over_noise"]
+        out.append(f"{Path(rec['name']).name} ({rec['kind']}): held-out equation error / "
+                   f"noise {h['before']:.3g} -> {h['after']:.3g} (x{h['improvement_factor']:.2f})")
+        pb, pa = m["prediction_before"]["rmse"], m["prediction_after"]["rmse"]
+        out.append("  prediction RMSE (" + f"{m['prediction_before']['horizon'] * 1e3:.0f} "
+                   "ms): " + ", ".join(f"{k} {_num(pb[k], '.3g')} -> {_num(pa[k], '.3g')}"
+                                       for k in pb if _num(pb[k]) != "n/a"))
     out.append(f"wall time {s['wall_time_s']:.1f} s")
     return "\n".join(out)
 
 
-def _fmt_val(x: float) -> str:
-    return f"{x:.4g}"
+# -- the Markdown report ---------------------------------------------------------------------
 
 
-def _markdown(d: Diagnosis, figs: list[str]) -> str:
-    """The one-minute report.
-
-    Verdict, what is missing (values, CIs, where each goes), fit before/after, confounding,
-    where the mismatch is, then the details.
-    """
-    s = d.summary
-    m = s["metrics"]
-    h = m["heldout_rmse_over_noise"]
-    nominal = {}
-    for name in s["effects"]:
+def _nominal_values(d: Diagnosis) -> dict[tuple[str, str], float]:
+    out = {}
+    for name in d.summary["effects_selected"]:
         eff = EFFECTS[name]
         vals = display_values(eff, np.asarray(eff.start(d.base), float))
         for pn, v in zip(eff.names, vals, strict=True):
-            nominal[(name, pn)] = float(v)
-    L = [f"# Diagnosis of `{Path(str(s['source'])).name}`", "",
-         f"**{s['verdict'][0].upper() + s['verdict'][1:]}.**", ""]
+            out[(name, pn)] = float(v)
+    return out
+
+
+def _md_read(d: Diagnosis) -> list[str]:
+    """What each reader used against what its source held (the read accounts)."""
+    accounts = d.summary.get("read_accounts") or []
+    if not accounts:
+        return []
+    L = ["## What was read", "",
+         "| source | samples used / present | seconds used / present | lost | by cause |",
+         "| --- | --- | --- | --- | --- |"]
+    for a in accounts:
+        causes = ", ".join(f"{k} {v}" for k, v in {**a["dropped"], **a["degraded"]}.items())
+        sp = a["seconds_present"]
+        L.append(f"| `{Path(a['source']).name}` | {a['samples_used']} / "
+                 f"{'' if a['exact'] else '~'}{a['samples_present']} | "
+                 f"{a['seconds_used']:.3f} / {'?' if sp is None else f'{sp:.3f}'} | "
+                 f"{100 * a['lost_fraction']:.2f} % | {causes or 'none'} |")
+    actions = [f"- `{Path(a['source']).name}`: {x}" for a in accounts for x in a["actions"]]
+    return [*L, "", *actions, ""] if actions else [*L, ""]
+
+
+def _md_physics(d: Diagnosis) -> list[str]:
+    s = d.summary
+    if not s["parameters"]:
+        return []
+    nominal = _nominal_values(d)
+    joint = {(j["effect"], j["name"]): j for j in s["between_recordings"].get("joint", [])}
+    L = ["## What the nominal model leaves out (one set of physics for the rig)", "",
+         "| effect | parameter | fitted | 95 % CI (joint fit) | with the spread between "
+         "recordings | nominal | unit | goes into | plausible |",
+         "|---|---|---|---|---|---|---|---|---|"]
+    for p in s["parameters"]:
+        nom = nominal.get((p["effect"], p["name"]))
+        j = joint.get((p["effect"], p["name"]))
+        spread = (f"{_num(j['ci95'][0])} .. {_num(j['ci95'][1])} (sd {_num(j['tau'], '.2g')}, "
+                  f"{j['recordings_used']} rec.)" if j and j["recordings_used"] >= 2 else "")
+        L.append(f"| {p['effect']} | {p['name']} | {p['value']:.4g} | "
+                 f"{_num(p['ci95'][0])} .. {_num(p['ci95'][1])} | {spread} | "
+                 f"{_num(nom) if nom is not None else ''} | {p['unit']} | "
+                 f"{DESTINATION.get(p['effect'], '')} | "
+                 f"{'yes' if p.get('plausible', True) else '**no: suspect**'} |")
+    L.append("")
+    per = s["between_recordings"].get("per_recording", [])
+    if per:
+        L += ["Per recording (each selected effect fitted on that recording alone; 'used' = "
+              "counted in the spread):", "",
+              "| recording | effect | parameter | value | 95 % CI | used |",
+              "|---|---|---|---|---|---|"]
+        for r in per:
+            L.append(f"| {Path(r['recording']).name} | {r['effect']} | {r['name']} | "
+                     f"{r['value']:.4g} | {_num(r['ci95'][0])} .. {_num(r['ci95'][1])} | "
+                     f"{_used(r)} |")
+        L.append("")
+    return L
+
+
+def _md_sensors(d: Diagnosis) -> list[str]:
+    s = d.summary
+    lat0 = s["options"]["latency0"]
+    L = ["## Sensor timing and camera, measured on each recording (not physics)", "",
+         "| recording | quantity | value | 95 % CI | unit |", "|---|---|---|---|---|"]
+    for r in s["sensor_timing"]:
+        add = lat0 if r["name"] == "latency" else 0.0
+        name = "camera latency (total)" if r["name"] == "latency" else r["description"]
+        if r.get("at_bound") is not None:
+            name += " (**at its bound: not identified**)"
+        L.append(f"| {Path(r['recording']).name} | {name} | {r['value'] + add:.4g} | "
+                 f"{_num(r['ci95'][0] + add)} .. {_num(r['ci95'][1] + add)} | {r['unit']} |")
+    for pr in d.parts:
+        lag = pr.prep.info.get("velocity_lag")
+        if lag is not None:
+            L.append(f"| {Path(pr.name).name} | logged velocity's lag ({lag.get('how', '')}) | "
+                     f"{lag['lag_s']:.4g} | {_num(lag.get('std_s'), '.2g')} (sd) | s |")
+    return [*L, ""]
+
+
+def _md_fit(d: Diagnosis) -> list[str]:
+    L = ["## Fit before / after (held-out blocks, never used for fitting)", "",
+         "Before = the nominal physics with each recording's sensor model; after = the "
+         "selected effects (suspects included, as fitted); raw = the nominal model with no "
+         "sensor model at all.", "",
+         "| recording | signal | nominal | corrected | ratio | Ljung-Box p nominal -> corr. |",
+         "|---|---|---|---|---|---|"]
+    for pr in d.parts:
+        m = pr.summary["metrics"]
+        for row, v in m["heldout_before"].items():
+            a = m["heldout_after"][row]
+            L.append(f"| {Path(pr.name).name} | {row} [{v['unit']}] | {v['rmse']:.3g} | "
+                     f"{a['rmse']:.3g} | {v['rmse'] / max(a['rmse'], 1e-300):.3g} | "
+                     f"{_num(v['whiteness']['p_value'], '.2g')} -> "
+                     f"{_num(a['whiteness']['p_value'], '.2g')} |")
+        pr_, pb, pa = (m["prediction_raw"]["rmse"], m["prediction_before"]["rmse"],
+                       m["prediction_after"]["rmse"])
+        for k in pb:
+            if pb[k] is None or not math.isfinite(pb[k]):
+                continue
+            L.append(f"| {Path(pr.name).name} | "
+                     f"{m['prediction_before']['horizon'] * 1e3:.0f} ms open-loop prediction "
+                     f"{k} [{_UNITS[k]}] (raw {_num(pr_.get(k), '.3g')}) | {_num(pb[k], '.3g')} "
+                     f"| {_num(pa[k], '.3g')} | {_num(pb[k] / pa[k] if pa[k] else None, '.3g')} "
+                     "| |")
+    return [*L, ""]
+
+
+def _md_where(d: Diagnosis) -> list[str]:
+    L = ["## Where the nominal residual exceeds the noise", ""]
+    for pr in d.parts:
+        loc = pr.summary["located"]
+        L.append(f"**{Path(pr.name).name}** ({pr.kind}):")
+        for k, v in loc["global"].items():
+            L.append(f"- {k}: RMS {v['rms_over_noise']:.3g} x noise, p = {v['p_value']:.2g}")
+        L.append(f"- {len(loc['windows'])} of {loc['n_windows']} windows of 0.5 s exceed the "
+                 "noise (Bonferroni 1 %)" + (": worst " + ", ".join(
+                     f"{w['t0']:.1f}-{w['t1']:.1f} s" for w in loc["windows"][:5])
+                     if loc["windows"] else "."))
+        for r in loc["regions"][:6]:
+            parts = [f"{k} {r[k]['rms_over_noise']:.3g}x" for k in r["signals"]]
+            L.append(f"- region {r['region']}: " + ", ".join(parts))
+        L.append("")
+    return L
+
+
+def _md_ranking(d: Diagnosis) -> list[str]:
+    s = d.summary
+    L = ["## Ranking: every effect alone (stage 1), and the stage that selected it", "",
+         "| effect | alone: held-out gain | null threshold | dBIC | selected at stage | "
+         "there: gain | threshold | dBIC |", "|---|---|---|---|---|---|---|---|"]
+    for r in s["ranking"]:
+        lin = " (linearised)" if r.get("fit", "full") != "full" else ""
+        deg = f" (degenerate: {r['degenerate']})" if r.get("degenerate") else ""
+        if r["selected"]:
+            tail = (f"{r['stage_selected']} | {r['gain_at_selection']:.4f} | "
+                    f"{r['threshold_at_selection']:.4f} | {r['dbic_at_selection']:.1f}")
+        else:
+            tail = "| | |"
+        L.append(f"| {r['effect']} | {r['heldout_gain']:.4f}{lin}{deg} | {r['threshold']:.4f} | "
+                 f"{r['dbic']:.1f} | {tail} |")
+    L += ["", "Held-out gain: the fraction of the held-out cost an effect removes (with every "
+          "recording's sensor model refitted with it); it must beat the largest gain the same "
+          "fit reaches on pure noise (the null), lower the BIC by 6, be identifiable (not "
+          "degenerate) and exceed its engineering floor. An effect selected at a later stage "
+          "is judged on top of the effects chosen before it.", ""]
+    return L
+
+
+def _markdown(d: Diagnosis, figs: list[str]) -> str:
+    """The one-minute report: verdict, physics, sensors, fit, confounds, where, ranking."""
+    s = d.summary
+    L = [f"# Diagnosis of `{_sources(s)}`", "", f"**{s['verdict'][0].upper() + s['verdict'][1:]}"
+         ".**", ""]
     for note in s.get("notes", []):
-        L.append(f"> {note}")
-        L.append("")
-    L += [f"- Recording: {s['duration']:.1f} s, "
-          f"{'ball rolling' if s['has_ball'] else 'frame only (no ball)'}; "
-          f"{s['preprocessing'].get('ball')}.",
-          f"- Held-out equation error, in units of the noise: {h['before']:.3g} with the "
-          f"nominal model, {h['after']:.3g} corrected (x{h['improvement_factor']:.3g}).",
+        L += [f"> {note}", ""]
+    L += [f"- Recordings: {len(d.parts)} part(s), {s['duration']:.1f} s: "
+          + "; ".join(f"{Path(pr.name).name} ({pr.kind}, {pr.summary['usable_s']:.1f} s usable)"
+                      for pr in d.parts) + ".",
           f"- Noise-only null: {s['null']['source']}.", ""]
-    if s["parameters"]:
-        L += ["## What the nominal model leaves out", "",
-              "| effect | parameter | fitted | 95 % CI | nominal | unit | goes into | "
-              "plausible |", "|---|---|---|---|---|---|---|---|"]
-        for p in s["parameters"]:
-            nom = nominal.get((p["effect"], p["name"]))
-            L.append(f"| {p['effect']} | {p['name']} | {_fmt_val(p['value'])} | "
-                     f"{_num(p['ci95'][0])} .. {_num(p['ci95'][1])} | "
-                     f"{_num(nom) if nom is not None else ''} | {p['unit']} | "
-                     f"{DESTINATION.get(p['effect'], '')} | "
-                     f"{'yes' if p.get('plausible', True) else '**no**'} |")
-        L.append("")
-    pairs = [c for c in s["confounded"] if c.get("kind") != "degenerate"]
+    L += _md_physics(d)
+    if s["suspects"]:
+        L += ["## Suspects (fitted, physically implausible: not in corrected_params.yaml)", ""]
+        L += [f"- **{n}**: {why}" for n, why in s["suspects"].items()] + [""]
+    pairs = [c for c in s["confounded"] if c.get("kind") in ("pair", "sensor")]
     degen = [c for c in s["confounded"] if c.get("kind") == "degenerate"]
     if pairs:
-        L += ["## Confounded (not separately identifiable here)", ""]
+        L += ["## Confounded (only a combination is identified here)", ""]
         L += [f"- {c['note']}" for c in pairs] + [""]
     if degen:
         L += ["## Degenerate fits (not added)", ""]
         L += [f"- {c['note']}" for c in degen] + [""]
-    L += ["## Fit before / after (held-out blocks, never used for fitting)", "",
-          "| signal | RMSE nominal | RMSE corrected | ratio | Ljung-Box p nominal | "
-          "corrected |", "|---|---|---|---|---|---|"]
-    for row, v in m["heldout_before"].items():
-        a = m["heldout_after"][row]
-        L.append(f"| {row} [N m] | {v['rmse']:.3g} | {a['rmse']:.3g} | "
-                 f"{v['rmse'] / max(a['rmse'], 1e-300):.3g} | "
-                 f"{_num(v['whiteness']['p_value'], '.2g')} | "
-                 f"{_num(a['whiteness']['p_value'], '.2g')} |")
-    for row, v in (m.get("located_windows") or {}).items():
-        if v:
-            L.append(f"| {row}, located windows only ({v['fraction_of_heldout'] * 100:.0f} % "
-                     f"of held-out) | {v['rmse_before']:.3g} | {v['rmse_after']:.3g} | "
-                     f"{v['improvement']:.3g} | | |")
-    pb, pa = m["prediction_before"]["rmse"], m["prediction_after"]["rmse"]
-    units = {"theta": "rad", "theta_dot": "rad/s", "ball_angle": "rad"}
-    for k in pb:
-        if pb[k] is None or not math.isfinite(pb[k]):
-            continue
-        ratio = pb[k] / pa[k] if pa[k] else float("nan")
-        L.append(f"| {m['prediction_before']['horizon'] * 1e3:.0f} ms open-loop prediction "
-                 f"{k} [{units[k]}] | {_num(pb[k], '.3g')} | {_num(pa[k], '.3g')} | "
-                 f"{_num(ratio, '.3g')} | | |")
-    L += ["", "## Where the nominal residual exceeds the noise", ""]
-    loc = s["located"]
-    for k, v in loc["global"].items():
-        L.append(f"- {k}: RMS {v['rms_over_noise']:.3g} x noise, p = {v['p_value']:.2g}")
-    L.append(f"- {len(loc['windows'])} of {loc['n_windows']} windows of 0.5 s exceed the "
-             "noise (Bonferroni 1 %)" + (": worst " + ", ".join(
-                 f"{w['t0']:.1f}-{w['t1']:.1f} s" for w in loc["windows"][:5])
-                 if loc["windows"] else "."))
-    for r in loc["regions"][:6]:
-        parts = [f"{k} {r[k]['rms_over_noise']:.3g}x" for k in r["signals"]]
-        L.append(f"- region {r['region']}: " + ", ".join(parts))
-    L += ["", "## Ranking (each effect alone against the nominal model)", "",
-          "| effect | held-out gain | null threshold | dBIC | selected |",
-          "|---|---|---|---|---|"]
-    for r in s["ranking"]:
-        lin = " (linearised)" if r.get("fit", "full") != "full" else ""
-        L.append(f"| {r['effect']} | {r['heldout_gain']:.4f}{lin} | {r['threshold']:.4f} | "
-                 f"{r['dbic']:.1f} | {'yes' if r['selected'] else ''} |")
-    L += ["", "Held-out gain: the fraction of the held-out cost an effect removes; it must beat "
-          "the largest gain the same fit reaches on pure noise (the null) and lower the BIC by "
-          "6. Effects far below their threshold after a linearised screening are not fitted "
-          "further.", ""]
+    L += _md_read(d) + _md_sensors(d) + _md_fit(d) + _md_where(d) + _md_ranking(d)
     L += ["## Figures", ""] + [f"![{f}]({f})" for f in figs] + [""]
     L += ["Files: `corrected_params.yaml` (physics: run it with `bfr simulate --params` or as "
-          "the simulator node's parameter file), `camera_correction.yaml` (sensor: latency, "
-          "origin offset), `diagnosis.json`.", ""]
+          "the simulator node's parameter file; suspects left out), `sensor_model.yaml` (each "
+          "recording's timing and camera), `diagnosis.json`.", ""]
     return "\n".join(L)
 
 
-def _plots(d: Diagnosis, out: Path) -> list[str]:
+# -- figures ---------------------------------------------------------------------------------
+
+
+def _plots(d: Diagnosis, out: Path, progress: Callable[[str], None] | None = None
+           ) -> list[str]:
     """Draw the report's figures into ``out``; returns their file names.
 
-    ``residual_time.png``, ``residual_phi.png`` (with a ball), ``overlay.png`` and
-    ``ranking.png`` (docs/diagnosis.md).
+    Per recording ``residual_time_<k>.png`` and (with a ball) ``residual_phi_<k>.png`` and
+    ``overlay_<k>.png``; ``ranking.png``; with a rolling ball ``phi_dot.png`` (the ball's
+    speed along the frame: measured, nominal and corrected model in closed loop).
     """
     import matplotlib  # noqa: PLC0415 - optional heavy: plots only
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # noqa: PLC0415 - optional heavy: plots only
 
-    rows = _plot_rows(d)
-    names = [_plot_residual_time(plt, d, rows, out)]
-    if d.prep.has_ball:
-        names.append(_plot_residual_phi(plt, d, rows, out))
-    names.append(_plot_overlay(plt, d, out))
+    names = []
+    for k, pr in enumerate(d.parts):
+        names.append(_plot_residual_time(plt, pr, out, k))
+        if pr.prep.has_ball:
+            names.append(_plot_residual_phi(plt, pr, out, k))
+        names.append(_plot_overlay(plt, pr, out, k))
     names.append(_plot_ranking(plt, d, out))
+    rolling = [pr for pr in d.parts if pr.kind == "rolling"]
+    if rolling:
+        if progress:
+            progress("phi_dot.png: nominal and corrected model in closed loop")
+        names.append(_plot_phi_dot(plt, d, rolling[0], out))
     return names
 
 
-@dataclass(frozen=True, kw_only=True, eq=False)
-class _PlotRow:
-    """One equation row as plotted: label, nominal and corrected residual, noise scale."""
-
-    label: str
-    nominal: np.ndarray       # [N m]
-    corrected: np.ndarray     # [N m]
-    sigma: float              # [N m] the null's noise scale
-
-
-def _plot_rows(d: Diagnosis) -> list[_PlotRow]:
-    """The frame's torque row, and the ball's row when the recording has a ball."""
-    rows = [_PlotRow(label="frame torque row r1 [N m]", nominal=d.res_before.r1,
-                     corrected=d.res_after.r1, sigma=d.null.sigma[0])]
-    if d.prep.has_ball:
-        rows.append(_PlotRow(label="ball row r2 [N m]", nominal=d.res_before.r2,
-                             corrected=d.res_after.r2, sigma=d.null.sigma[1]))
-    return rows
+def _rows_of(pr: PartResult) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
+    labels = {1: "frame torque row r1 [N m]", 2: "ball row r2 [N m]",
+              3: "ball distance row r3 [m]"}
+    return [(labels[r], pr.res_before.rows[r - 1], pr.res_after.rows[r - 1],
+             float(pr.sigma[r - 1])) for r in pr.rows]
 
 
 def _save(plt: Any, fig: Any, out: Path, name: str) -> str:
@@ -256,75 +373,71 @@ def _save(plt: Any, fig: Any, out: Path, name: str) -> str:
     return name
 
 
-def _plot_residual_time(plt: Any, d: Diagnosis, rows: list[_PlotRow], out: Path) -> str:
-    """``residual_time.png``: both rows against time, the windows exceeding the noise red."""
-    t0 = d.prep.t[0]
-    tk = d.prep.t[d.res_before.idx] - t0
-    fig, axs = plt.subplots(len(rows), 1, figsize=(10, 2.6 * len(rows)), sharex=True,
+def _plot_residual_time(plt: Any, pr: PartResult, out: Path, k: int) -> str:
+    """Every row against time (nominal with the sensor model, corrected), windows red."""
+    rows = _rows_of(pr)
+    t0 = pr.prep.t[0]
+    tk = pr.prep.t[pr.res_before.idx] - t0
+    fig, axs = plt.subplots(len(rows), 1, figsize=(10, 2.4 * len(rows)), sharex=True,
                             squeeze=False)
-    # break the lines where samples are missing (ball gaps, stitched runs)
     gap = np.diff(tk) > 3.0 * np.median(np.diff(tk)) if tk.size > 2 else np.zeros(0, bool)
     cut = np.nonzero(gap)[0] + 1
 
     def broken(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return np.insert(tk, cut, np.nan), np.insert(np.asarray(y, float), cut, np.nan)
 
-    for ax, row in zip(axs[:, 0], rows, strict=True):
-        ax.plot(*broken(row.nominal), lw=0.6, label="nominal")
-        ax.plot(*broken(row.corrected), lw=0.6, label="corrected")
-        ax.axhspan(-2 * row.sigma, 2 * row.sigma, color="0.85", label="+-2 noise (null)")
-        for w in d.summary["located"]["windows"][:40]:
+    for ax, (label, r0, r1, sig) in zip(axs[:, 0], rows, strict=True):
+        ax.plot(*broken(r0), lw=0.6, label="nominal")
+        ax.plot(*broken(r1), lw=0.6, label="corrected")
+        ax.axhspan(-2 * sig, 2 * sig, color="0.85", label="+-2 noise (null)")
+        for w in pr.summary["located"]["windows"][:40]:
             ax.axvspan(w["t0"] - t0, w["t1"] - t0, color="r", alpha=0.08)
-        ax.set_ylabel(row.label)
+        ax.set_ylabel(label, fontsize=8)
     axs[0, 0].legend(loc="upper right", fontsize=8)
+    axs[0, 0].set_title(f"{Path(pr.name).name} ({pr.kind})", fontsize=9)
     axs[-1, 0].set_xlabel("t [s] (red: windows exceeding the noise)")
-    return _save(plt, fig, out, "residual_time.png")
+    return _save(plt, fig, out, f"residual_time_{k}.png")
 
 
-def _plot_residual_phi(plt: Any, d: Diagnosis, rows: list[_PlotRow], out: Path) -> str:
-    """``residual_phi.png``: each row's mean in 5-degree bins of the ball's place ``phi``."""
-    ph = np.mod(d.res_before.phi[d.res_before.idx], 2 * np.pi)
-    ph1 = np.mod(d.res_after.phi[d.res_after.idx], 2 * np.pi)
+def _plot_residual_phi(plt: Any, pr: PartResult, out: Path, k: int) -> str:
+    """Each row's mean in 5-degree bins of the ball's place ``phi``."""
+    rows = _rows_of(pr)
+    ph = np.mod(pr.res_before.phi[pr.res_before.idx], 2 * np.pi)
+    ph1 = np.mod(pr.res_after.phi[pr.res_after.idx], 2 * np.pi)
     bins = np.linspace(0, 2 * np.pi, 73)
-    fig, axs = plt.subplots(len(rows), 1, figsize=(10, 2.6 * len(rows)), sharex=True,
+    fig, axs = plt.subplots(len(rows), 1, figsize=(10, 2.4 * len(rows)), sharex=True,
                             squeeze=False)
-    for ax, row in zip(axs[:, 0], rows, strict=True):
-        for p, r, name in ((ph, row.nominal, "nominal"), (ph1, row.corrected, "corrected")):
-            k = np.digitize(p, bins) - 1
-            mean = np.array([np.nanmean(r[k == i]) if np.any(k == i) else np.nan
-                             for i in range(72)])
+    for ax, (label, r0, r1, _sig) in zip(axs[:, 0], rows, strict=True):
+        for p, r, name in ((ph, r0, "nominal"), (ph1, r1, "corrected")):
+            idx = np.digitize(p, bins) - 1
+            mean = np.array([np.nanmean(r[idx == i]) if np.any((idx == i) & np.isfinite(r))
+                             else np.nan for i in range(72)])
             ax.plot(np.degrees(0.5 * (bins[1:] + bins[:-1])), mean, label=name)
         ax.axhline(0, color="0.5", lw=0.5)
-        ax.set_ylabel("mean " + row.label)
+        ax.set_ylabel("mean " + label, fontsize=8)
     axs[0, 0].legend(fontsize=8)
     axs[-1, 0].set_xlabel("ball's place on the frame: contact angle phi mod 360 [deg]")
-    return _save(plt, fig, out, "residual_phi.png")
+    return _save(plt, fig, out, f"residual_phi_{k}.png")
 
 
-def _plot_overlay(plt: Any, d: Diagnosis, out: Path) -> str:
-    """``overlay.png``: 100 ms predictions, nominal and corrected, over 3 s of measurement.
-
-    The ball's world angle (or, frame only, theta_dot) around the middle prediction; with a
-    fitted camera correction also the corrected measurement the corrected model predicts.
-    """
-    prep = d.prep
+def _plot_overlay(plt: Any, pr: PartResult, out: Path, k: int) -> str:
+    """100 ms predictions, nominal and corrected, over 3 s of the (corrected) measurement."""
+    prep = pr.prep
     t0 = prep.t[0]
     key = "ball_angle" if prep.has_ball else "theta_dot"
     fig, ax = plt.subplots(figsize=(10, 3.2))
-    ref = prep.psi_w if prep.has_ball else prep.theta_dot
-    tr_b = d.pred_before.get("traces", [])
-    tr_a = d.pred_after.get("traces", [])
+    tr_b = pr.pred_before.get("traces", [])
+    tr_a = pr.pred_after.get("traces", [])
     if tr_b:
         tmid = tr_b[len(tr_b) // 2]["t"][0]
         lo, hi = tmid - 1.5, tmid + 1.5
         m = (prep.t >= lo) & (prep.t <= hi)
-        ax.plot(prep.t[m] - t0, ref[m], "k", lw=1.2, label="measured (smoothed)")
-        sensor = d.selection.sensor
-        if prep.has_ball and (sensor.latency != 0.0 or sensor.has_offset):
-            # the corrected model is compared with the camera-corrected measurement
-            ref_c = prep.psi_for(sensor)[0]
-            ax.plot(prep.t[m] - t0, ref_c[m], "k--", lw=1.0,
-                    label="measured, camera corrected (compare with the corrected model)")
+        for sensor, style, label in ((pr.sensor0, "k", "measured (sensor model, nominal "
+                                                       "physics)"),
+                                     (pr.sensor, "k--", "measured (sensor model, corrected "
+                                                        "physics)")):
+            ref = prep.psi_for(sensor)[0] if prep.has_ball else prep.theta_dot
+            ax.plot(prep.t[m] - t0, ref[m], style, lw=1.0, label=label)
         for traces, colour, label in ((tr_b, "C0", "nominal 100 ms prediction"),
                                       (tr_a, "C1", "corrected 100 ms prediction")):
             shown = [tr for tr in traces if lo <= tr["t"][0] <= hi]
@@ -333,14 +446,15 @@ def _plot_overlay(plt: Any, d: Diagnosis, out: Path) -> str:
                         label=label if i == 0 else None)
         handles, labels = ax.get_legend_handles_labels()
         uniq = dict(zip(labels, handles, strict=True))
-        ax.legend(uniq.values(), uniq.keys(), fontsize=8)
+        ax.legend(uniq.values(), uniq.keys(), fontsize=7)
+    ax.set_title(f"{Path(pr.name).name}", fontsize=9)
     ax.set_xlabel("t [s] (held-out block)")
     ax.set_ylabel("ball world angle [rad]" if prep.has_ball else "theta_dot [rad/s]")
-    return _save(plt, fig, out, "overlay.png")
+    return _save(plt, fig, out, f"overlay_{k}.png")
 
 
 def _plot_ranking(plt: Any, d: Diagnosis, out: Path) -> str:
-    """``ranking.png``: each effect's held-out gain alone against its null threshold."""
+    """Each effect's held-out gain alone against its null threshold; the stage selected."""
     rk = d.summary["ranking"]
     fig, ax = plt.subplots(figsize=(8, 0.3 * len(rk) + 1.2))
     y = np.arange(len(rk))
@@ -348,14 +462,110 @@ def _plot_ranking(plt: Any, d: Diagnosis, out: Path) -> str:
     ax.barh(y, gains, color=["C2" if r["selected"] else "C7" for r in rk])
     ax.scatter([r["threshold"] for r in rk], y, marker="|", color="r", s=200,
                label="null threshold")
-    ax.set_yticks(y, [r["effect"] for r in rk])
+    ax.set_yticks(y, [r["effect"] + (f" (stage {r['stage_selected']})" if r["selected"]
+                                     else "") for r in rk])
     ax.invert_yaxis()
-    ax.set_xlabel("held-out cost reduction, single effect vs nominal (green: selected)")
+    ax.set_xlabel("held-out cost reduction of each effect alone (green: selected)")
     ax.legend(fontsize=8)
     return _save(plt, fig, out, "ranking.png")
 
 
-def write_outputs(d: Diagnosis, out_dir: Path, plots: bool = True) -> Path:
+@dataclass(frozen=True, kw_only=True)
+class PhiDotProfiles:
+    """The ball's speed along the frame, ``phi_dot`` in bins of ``phi mod pi``.
+
+    Attributes
+    ----------
+    centres : ndarray
+        Bin centres [rad].
+    measured, nominal, corrected : ndarray
+        Mean phi_dot per bin [rad/s]: the recording (through the corrected model's
+        measurement model), and the nominal and corrected physics in closed loop with the
+        nominal controller (NaN where no sample, or where that loop lost the ball).
+    notes : list of str
+        What each closed loop did.
+    """
+
+    centres: np.ndarray
+    measured: np.ndarray
+    nominal: np.ndarray
+    corrected: np.ndarray
+    notes: list[str]
+
+    def rms(self, which: str) -> float:
+        """RMS difference [rad/s] of a profile from the measured one over the common bins."""
+        a = getattr(self, which)
+        ok = np.isfinite(a) & np.isfinite(self.measured)
+        return float(np.sqrt(np.mean((a[ok] - self.measured[ok]) ** 2))) if ok.any() else \
+            float("nan")
+
+
+def phi_dot_profiles(d: Diagnosis, pr: PartResult, duration: float = 15.0,
+                     n_bins: int = 36) -> PhiDotProfiles:
+    """The ball's speed along the frame: measured, and simulated with either physics.
+
+    The simulations run the node suite's controller on its nominal model (as on the rig)
+    against the nominal plant and against the corrected plant (:attr:`Diagnosis.corrected`:
+    the plausible effects), started on the controller's orbit; the first 3 s are dropped.
+    """
+    edges = np.linspace(0.0, np.pi, n_bins + 1)
+    centres = 0.5 * (edges[1:] + edges[:-1])
+
+    def profile(phi: np.ndarray, phid: np.ndarray) -> np.ndarray:
+        ok = np.isfinite(phi) & np.isfinite(phid)
+        k = np.digitize(np.mod(phi[ok], np.pi), edges) - 1
+        v = phid[ok]
+        return np.array([float(np.mean(v[k == i])) if np.any(k == i) else np.nan
+                         for i in range(n_bins)])
+
+    mask = pr.prep.ball_ok
+    measured = profile(np.where(mask, pr.res_after.phi, np.nan),
+                       np.where(mask, pr.res_after.phi_dot, np.nan))
+    notes = []
+    sims = {}
+    for label, plant in (("nominal", d.base), ("corrected", d.corrected)):
+        rec = stabilised_recording(plant, d.base, SynthConfig(duration=duration, phase=0.3),
+                                   np.random.default_rng(1), source=f"{label} closed loop")
+        keep = rec.t >= rec.t[0] + 3.0
+        sims[label] = profile(rec.phi_true[keep], rec.phi_dot_true[keep])
+        notes.append(f"{label} physics in closed loop: "
+                     + ("the ball kept rolling" if rec.meta["ball_rolled"] else
+                        "the nominal controller lost the ball (profile until then)")
+                     + f", mean phi_dot {rec.meta['loop']['mean_phi_dot']:.3f} rad/s")
+    return PhiDotProfiles(centres=centres, measured=measured, nominal=sims["nominal"],
+                          corrected=sims["corrected"], notes=notes)
+
+
+def _plot_phi_dot(plt: Any, d: Diagnosis, pr: PartResult, out: Path) -> str:
+    """``phi_dot.png``: the ball's speed along the frame (:func:`phi_dot_profiles`)."""
+    prof = phi_dot_profiles(d, pr)
+    fig, ax = plt.subplots(figsize=(9, 3.6))
+    deg = np.degrees(prof.centres)
+    ax.plot(deg, prof.measured, "k.-", label=f"measured ({Path(pr.name).name})")
+    ax.plot(deg, prof.nominal, "C0-", label=f"nominal model in closed loop (rms diff. "
+                                             f"{prof.rms('nominal'):.3f} rad/s)")
+    ax.plot(deg, prof.corrected, "C1-", label=f"corrected model in closed loop (rms diff. "
+                                               f"{prof.rms('corrected'):.3f} rad/s)")
+    ax.set_xlabel("ball's place on the frame: contact angle phi mod 180 [deg]")
+    ax.set_ylabel("phi_dot [rad/s]")
+    ax.set_title("the ball's speed along the frame", fontsize=9)
+    ax.legend(fontsize=7)
+    d.findings.setdefault("phi_dot_profile", {
+        "recording": pr.name, "phi_deg": deg.tolist(),
+        "measured": [_finite(v) for v in prof.measured],
+        "nominal": [_finite(v) for v in prof.nominal],
+        "corrected": [_finite(v) for v in prof.corrected],
+        "rms_nominal": _finite(prof.rms("nominal")),
+        "rms_corrected": _finite(prof.rms("corrected")), "notes": prof.notes})
+    return _save(plt, fig, out, "phi_dot.png")
+
+
+def _finite(x: float) -> float | None:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def write_outputs(d: Diagnosis, out_dir: Path, plots: bool = True,
+                  progress: Callable[[str], None] | None = None) -> Path:
     """Write report.md, diagnosis.json, the YAML files and PNGs atomically into out_dir."""
     out_dir = Path(out_dir)
     parent = out_dir.resolve().parent
@@ -365,11 +575,11 @@ def write_outputs(d: Diagnosis, out_dir: Path, plots: bool = True) -> Path:
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it private; the result is an ordinary dir
     try:
-        figs = _plots(d, tmp) if plots else []
+        figs = _plots(d, tmp, progress) if plots else []
         (tmp / "report.md").write_text(_markdown(d, figs))
         (tmp / "diagnosis.json").write_text(json.dumps(d.to_json(), indent=1, default=str))
         (tmp / "corrected_params.yaml").write_text(corrected_yaml(d))
-        (tmp / "camera_correction.yaml").write_text(camera_yaml(d))
+        (tmp / "sensor_model.yaml").write_text(sensor_yaml(d))
         if out_dir.exists():
             old = parent / f".{out_dir.name}.old-{os.getpid()}"
             out_dir.rename(old)
@@ -381,3 +591,4 @@ def write_outputs(d: Diagnosis, out_dir: Path, plots: bool = True) -> Path:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     return out_dir
+

@@ -15,19 +15,31 @@ sides are convolved with one smooth kernel ``k`` (``cos^4``, half-width ``T``, u
 needs only the states and their first derivatives, evaluated pointwise in the exact model
 (including fast terms such as track bumps), and both sides see exactly the same filter.
 It never diverges on the unstable system (no integration), and it is linear in the
-measurement noise to first order. ``Q_theta = k_u u - c_v th' - T_c tanh(th'/v_c)``;
+measurement noise to first order. ``Q_theta = k_u u + tau_0 - c_v th' - T_c tanh(th'/v_c)``;
 ``Q_phi = -mu_rol lam tanh(ph'/v_r) F_n`` with ``F_n = f0 + f_th th''`` (the dynamics
 module's exact normal force; th'' from preprocessing).
 
-The measured ball angle enters through ``psi = theta + psi_w`` (ball-centre angle in the
-frame); the contact angle is ``phi = ball_angle^{-1}(psi)`` of the candidate's curve
-(Newton) and ``phi_dot = psi_dot / psi'(phi)``, so contour and radius changes are
-propagated to the measurement model too. The frame-only row (no ball) is
-``r1 = k' * (J_f th') - k * Q_theta``.
+The measured ball angle enters through ``psi = theta + theta_0 + psi_w`` (ball-centre angle
+in the frame; ``theta_0`` the encoder's zero, a sensor correction like the camera's); the
+contact angle is ``phi = ball_angle^{-1}(psi)`` of the candidate's curve (Newton) and
+``phi_dot = psi_dot / psi'(phi)``, so contour and radius changes are propagated to the
+measurement model too. A third, kinematic row compares where the camera puts the ball with
+where the model's curve does:
+
+    r3 = k * (rho - |p(phi)|)                                             [m]
+
+``rho`` the ball's measured distance from the shaft (camera offset and scale corrected).
+It sees the contour's radius directly, which the dynamics rows see only through the
+forces; its confounds (the contour's mean radius, the rolling radius, the camera's scale
+and vertical offset: the camera sees the ball near the top of the frame) are resolved, or
+reported, by the joint fit with the dynamics. The frame-only row (no ball) is
+``r1 = k' * (J_f th') - k * (Q_theta - G1_f)`` (``G1_f`` the frame's own weight); a
+frame-held recording has rows 2 and 3 only (``th' = th'' = 0``).
 
 Numerics. The kernel is ``cos^4`` with half-width 0.2 s (see :func:`kernel_pair` for why not
-Hann); the model terms are evaluated on every second grid sample (4 ms quadrature nodes,
-exact to ``O(h^4)`` for the pre-filtered integrand) and the filtered rows kept every 12 ms.
+Hann; shorter for runs too short to hold four of them, :func:`usable_half_width`); the
+model terms are evaluated on every second grid sample (4 ms quadrature nodes, exact to
+``O(h^4)`` for the pre-filtered integrand) and the filtered rows kept every 12 ms.
 One evaluation of both rows over a 60 s recording takes ~10 ms (compiled loop, one curve
 evaluation per Newton step).
 """
@@ -38,22 +50,45 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from bfr_model.dynamics import RigidModel, curve_terms, gravity_from_curve, mass_from_curve
+from bfr_model.dynamics import (
+    RigidModel,
+    curve_terms,
+    frame_gravity,
+    gravity_from_curve,
+    joint_torque,
+    mass_from_curve,
+)
 from bfr_model.jit import njit
-from bfr_model.layout import I_CV, I_CW, I_G, I_KU, I_M, I_MUR, I_SW, I_TC, I_VC, I_VR
+from bfr_model.layout import (
+    I_CV,
+    I_CW,
+    I_G,
+    I_JF,
+    I_KU,
+    I_M,
+    I_MEX,
+    I_MEY,
+    I_MUR,
+    I_SW,
+    I_TAU0,
+    I_TC,
+    I_VC,
+    I_VR,
+)
 from bfr_model.params import RigParams
 from numpy.typing import NDArray
 
-from bfr_diagnose.preprocess import Prepared, SensorCorrection
+from bfr_diagnose.preprocess import Prepared, SensorCorrection, segments_from_mask
 
-__all__ = ["Residual", "ResidualConfig", "ResidualEvaluator", "kernel_pair", "pointwise_terms"]
+__all__ = ["Residual", "ResidualConfig", "ResidualEvaluator", "kernel_pair", "pointwise_terms",
+           "usable_half_width"]
 
 FloatArray = NDArray[np.float64]
 
 
 @njit
 def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatArray,
-                    u: FloatArray, psi: FloatArray, psi_dot: FloatArray,
+                    psi: FloatArray, psi_dot: FloatArray,
                     phi_guess: FloatArray, P: FloatArray, R: float, rho0: float,
                     orders: FloatArray, ccos: FloatArray, csin: FloatArray, bphi: FloatArray,
                     bh: FloatArray, bw: FloatArray) -> tuple:
@@ -65,14 +100,22 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
     :func:`bfr_model.dynamics.mass_terms` and :func:`bfr_model.dynamics.rigid_terms` (including
     the frame's wobble factors), written inline.
 
+    The frame's own terms (its inertia, the drive, the joint, its weight) are left out of
+    row 1 here: they do not depend on the ball, and :meth:`ResidualEvaluator.evaluate` adds
+    them outside this loop, so that a change of frame parameters alone reuses the ball's
+    terms (the fits' Jacobian columns of the frame's effects cost a few vector operations).
+
     Returns
     -------
     tuple of ndarray
-        ``(p1, f1, p2, f2, phi, phi_dot, fn)``: ``p`` the generalised momenta [N m s],
-        ``f1 = Q_theta - G1`` and ``f2 = Q_phi - G2 + dT/dphi`` [N m], the contact angle
-        [rad], its rate [rad/s] and the normal force [N].
+        ``(p1b, f1b, p2, f2, phi, phi_dot, fn, pr)``: ``p1b = (M11 - J_f) th' + M12 ph'`` and
+        ``p2`` the generalised momenta without the frame's inertia [N m s],
+        ``f1b = -G1_ball`` (the ball's weight on the frame) and ``f2 = Q_phi - G2 + dT/dphi``
+        [N m], the contact angle [rad], its rate [rad/s], the normal force [N] and the
+        model's distance of the ball centre from the shaft ``|p(phi)|`` [m].
     """
     n = theta.shape[0]
+    pr_o = np.empty(n)
     p1 = np.empty(n)
     f1 = np.empty(n)
     p2 = np.empty(n)
@@ -106,7 +149,7 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
         st = np.sin(th)
         ct = np.cos(th)
         g1, g2 = gravity_from_curve(st, ct, px, py, p1x, p1y, P)
-        q1 = P[I_KU] * u[i] - P[I_CV] * thd - P[I_TC] * np.tanh(thd / P[I_VC])
+        g1 = g1 - frame_gravity(st, ct, P)  # the ball's weight only (the frame's: outside)
         # normal force n3 . m (r_dd + g y) (bfr_model.dynamics.rigid_terms; the phi_dd term
         # vanishes for a round ball: n . p' = 0)
         thd2 = thd * thd
@@ -119,14 +162,15 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
               + m * (-cw * nx * py + ny * cw * px) * theta_ddot[i])
         q2 = -P[I_MUR] * lam * np.tanh(phd / P[I_VR]) * fn
         dtdphi = 0.5 * (dm11 * thd2 + 2.0 * dm12 * thd * phd + dm22 * phd2)
-        p1[i] = m11 * thd + m12 * phd
+        p1[i] = (m11 - P[I_JF]) * thd + m12 * phd
         p2[i] = m12 * thd + m22 * phd
-        f1[i] = q1 - g1
+        f1[i] = -g1
         f2[i] = q2 - g2 + dtdphi
         phi_o[i] = ph
         phid_o[i] = phd
         fn_o[i] = fn
-    return p1, f1, p2, f2, phi_o, phid_o, fn_o
+        pr_o[i] = np.sqrt(px * px + py * py)
+    return p1, f1, p2, f2, phi_o, phid_o, fn_o, pr_o
 
 
 def kernel_pair(J: int, dt: float) -> tuple[FloatArray, FloatArray]:
@@ -149,6 +193,30 @@ def kernel_pair(J: int, dt: float) -> tuple[FloatArray, FloatArray]:
     return k, kd
 
 
+#: Entries of the kernel vector that the frame's own terms use (not the ball's).
+_FRAME_ENTRIES = (I_JF, I_CV, I_TC, I_VC, I_KU, I_MEX, I_MEY, I_TAU0)
+
+
+def _ball_key(P: FloatArray) -> bytes:
+    """The entries of ``P`` the ball's terms depend on (all but the frame's own)."""
+    q = np.array(P, float)
+    q[list(_FRAME_ENTRIES)] = 0.0
+    return q.tobytes()
+
+
+def usable_half_width(ok: NDArray[np.bool_], dt: float, half_width: float,
+                      floor: float = 0.05) -> float:
+    """The kernel's half-width [s] for a recording whose usable stretches are ``ok``.
+
+    ``half_width`` when the longest usable stretch holds four of them; shorter runs (a log
+    of 0.5-s runs) get a quarter of their longest stretch, but never less than ``floor``,
+    so that every run still gives equation-error samples.
+    """
+    segs = segments_from_mask(ok)
+    longest = max((b - a for a, b in segs), default=0) * dt
+    return float(min(half_width, max(floor, longest / 4.0)))
+
+
 @dataclass(frozen=True)
 class ResidualConfig:
     """Settings of the equation error (units in brackets)."""
@@ -167,7 +235,10 @@ class Residual:
     ----------
     r1, r2 : ndarray
         Rows 1 and 2 [N m] at the kept samples ``idx`` (NaN where not defined); r2 is
-        all-NaN for frame-only recordings.
+        all-NaN for frame-only recordings, r1 for frame-held ones.
+    r3 : ndarray
+        The kinematic row [m]: the filtered difference between the ball's distance from the
+        shaft as measured and the model's ``|p(phi)|`` (all-NaN without a ball).
     idx : ndarray of int
         Grid indices of the kept samples.
     phi, phi_dot, fn : ndarray
@@ -176,9 +247,11 @@ class Residual:
     """
 
     def __init__(self, r1: FloatArray, r2: FloatArray, idx: NDArray[np.intp],
-                 grid: Any = None, nodes: tuple | None = None, n: int = 0) -> None:
+                 grid: Any = None, nodes: tuple | None = None, n: int = 0,
+                 r3: FloatArray | None = None) -> None:
         self.r1 = r1
         self.r2 = r2
+        self.r3 = np.full(r1.size, np.nan) if r3 is None else r3
         self.idx = idx
         self._grid = grid
         self._nodes = nodes
@@ -208,6 +281,11 @@ class Residual:
         """Normal force on the grid [N]."""
         return self._get(2, "fn")
 
+    @property
+    def rows(self) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(r1, r2, r3)``."""
+        return self.r1, self.r2, self.r3
+
 
 class ResidualEvaluator:
     """Evaluate the equation error of a candidate model on prepared data.
@@ -226,11 +304,12 @@ class ResidualEvaluator:
         dt = float(prep.t[1] - prep.t[0])
         q = max(int(self.cfg.quad_step), 1)
         h = q * dt
-        J = max(round(self.cfg.half_width / h), 2)
+        ok = prep.ball_ok if prep.has_ball else prep.frame_ok
+        self.half_width = usable_half_width(ok, dt, self.cfg.half_width)
+        J = max(round(self.half_width / h), 2)
         self.k, self.kd = kernel_pair(J, h)
         self.J = J
         n = prep.n
-        ok = prep.ball_ok if prep.has_ball else prep.frame_ok
         self.rows_mask = ok
         self._grid = np.arange(0, n, q)             # quadrature nodes (full-grid indices)
         ok_s = ok[self._grid]
@@ -245,6 +324,7 @@ class ResidualEvaluator:
         self._sel = self._grid[self._sel_s]         # ... as full-grid indices
         self._ok_full = np.nonzero(ok)[0]
         self._phi_guess = None
+        self._ball_cache: tuple | None = None  # the ball's terms of the last evaluation
 
     def _conv(self, x: FloatArray, kern: FloatArray) -> FloatArray:
         """Kernel sums at the kept outputs; ``x`` is given on the quadrature nodes."""
@@ -267,32 +347,52 @@ class ResidualEvaluator:
             sensor = SensorCorrection(latency=float(sensor or 0.0))
         prep = self.prep
         model = RigidModel(params)
-        ns = self._grid.size
         g = self._grid
+        u = prep.u_for(sensor)
         if not prep.has_ball:
             P = model.P
-            jf = P[2]
             thd = prep.theta_dot[g]
-            q1 = P[10] * prep.u[g] - P[5] * thd - P[6] * np.tanh(thd / P[7])
-            r1 = self._conv(jf * thd, self.kd) - self._conv(q1, self.k)
+            th = prep.theta[g] + sensor.theta_zero
+            q1 = (joint_torque(u[g], thd, P)
+                  - frame_gravity(np.sin(th), np.cos(th), P))
+            r1 = self._conv(P[I_JF] * thd, self.kd) - self._conv(q1, self.k)
             return Residual(r1, np.full(r1.size, np.nan), self.idx, n=prep.n)
         sel = self._sel
-        psi_w, psi_wd = prep.psi_for(sensor)
-        psi = prep.theta[sel] + psi_w[sel]
-        psid = prep.theta_dot[sel] + psi_wd[sel]
-        guess = self._phi_guess if self._phi_guess is not None else psi
-        p1, f1, p2, f2, phi, phid, fn = pointwise_terms(
-            prep.theta[sel], prep.theta_dot[sel], prep.theta_ddot[sel], prep.u[sel], psi, psid,
-            guess, *model.kernel_args)
-        if self._phi_guess is None:
-            self._phi_guess = phi
+        th = prep.theta[sel] + sensor.theta_zero
+        P = model.P
+        key = (_ball_key(P), *model.geom_args[:2],
+               *(a.tobytes() for a in model.geom_args[2:]), sensor.latency, sensor.offset_x,
+               sensor.offset_y, sensor.rotation, sensor.scale, sensor.theta_zero)
+        if self._ball_cache is not None and self._ball_cache[0] == key:
+            ball = self._ball_cache[1]
+        else:
+            psi_w, psi_wd, rho = prep.ball_for(sensor)
+            psi = th + psi_w[sel]
+            psid = prep.theta_dot[sel] + psi_wd[sel]
+            guess = self._phi_guess if self._phi_guess is not None else psi
+            p1b, f1b, p2, f2, phi, phid, fn, pr = pointwise_terms(
+                th, prep.theta_dot[sel], prep.theta_ddot[sel], psi, psid, guess,
+                *model.kernel_args)
+            if self._phi_guess is None:
+                self._phi_guess = phi
+            r2 = self._conv(self._nodes(p2), self.kd) - self._conv(self._nodes(f2), self.k)
+            r3 = self._conv(self._nodes(rho[sel] - pr), self.k)
+            ball = (self._conv(self._nodes(p1b), self.kd) - self._conv(self._nodes(f1b), self.k),
+                    r2, r3, (phi, phid, fn))
+            self._ball_cache = (key, ball)
+        r1b, r2, r3, grid_nodes = ball
+        if prep.frame_held:  # the frame's row needs the unknown holding torque
+            r1 = np.full(self._idx_s.size, np.nan)
+        else:
+            thd = prep.theta_dot[sel]
+            q1 = joint_torque(u[sel], thd, P) - frame_gravity(np.sin(th), np.cos(th), P)
+            r1 = (r1b + self._conv(self._nodes(P[I_JF] * thd), self.kd)
+                  - self._conv(self._nodes(q1), self.k))
+        return Residual(r1, r2, self.idx, grid=self._to_grid, nodes=grid_nodes, n=prep.n,
+                        r3=r3)
 
-        def nodes(arr: FloatArray) -> FloatArray:
-            a = np.zeros(ns)
-            a[self._sel_s] = arr
-            return a
-
-        r1 = self._conv(nodes(p1), self.kd) - self._conv(nodes(f1), self.k)
-        r2 = self._conv(nodes(p2), self.kd) - self._conv(nodes(f2), self.k)
-        return Residual(r1, r2, self.idx, grid=self._to_grid, nodes=(phi, phid, fn),
-                        n=prep.n)
+    def _nodes(self, arr: FloatArray) -> FloatArray:
+        """Values at the usable nodes -> every quadrature node (zero elsewhere)."""
+        a = np.zeros(self._grid.size)
+        a[self._sel_s] = arr
+        return a

@@ -25,7 +25,7 @@ Euler-Lagrange with Christoffel symbols (only d/dphi is non-zero):
 
 Generalised forces Q (perturbations; all zero in the nominal model):
 
-    Q_theta = k_u u - c_v th' - T_c tanh(th' / v_c)                 motor gain, joint friction
+    Q_theta = k_u u + tau_0 - c_v th' - T_c tanh(th' / v_c)   motor gain and offset, friction
     Q_phi   = -mu_rol F_n lam tanh(ph' / v_r)                        rolling resistance (seed 2.4)
 
 with F_n the normal force of the frame on the ball, ``F_n = n_w . m (r_ddot + g_e y_hat)``:
@@ -59,6 +59,14 @@ Perturbation terms (bfr_model.perturbations; all off by default, exact unless st
   machine precision (each pass shrinks the error by ``c_L m |p| / M11`` ~ 1e-6), and the
   torque that is applied is the one booked as dissipation, so the energy balance is exact.
 
+* Frame imbalance (``frame.imbalance`` = m_f e, ``frame.imbalance_angle`` = theta_e): the
+  frame's centre of mass at ``e [sin theta_e, cos theta_e]`` in frame coordinates adds
+  ``V_f = g_e (sin(theta) c M_x + cos(theta) M_y)``, ``M = m_f e [sin, cos] theta_e`` the first
+  mass moment (c: the wobble factor), so ``G1 += g_e (cos(theta) c M_x - sin(theta) M_y)``,
+  i.e. the torque ``m_f e g_e sin(theta - theta_e)`` without wobble. Conservative.
+* Torque offset (``actuator.torque_offset`` = tau_0): the drive applies ``k_u u + tau_0``;
+  its power ``(k_u u + tau_0) th'`` is booked as motor work.
+
 With all three the normal force is ``F_n = n3 . m (r_ddot + g_e y)``, ``n3 = W n``, linear in
 both accelerations: ``F_n = f0 + f_th th'' + f_ph ph''``.
 """
@@ -81,12 +89,15 @@ from bfr_model.layout import (
     I_JF,
     I_KU,
     I_M,
+    I_MEX,
+    I_MEY,
     I_MF,
     I_MUR,
     I_NS,
     I_R,
     I_SBAR,
     I_SW,
+    I_TAU0,
     I_TC,
     I_VC,
     I_VR,
@@ -97,6 +108,8 @@ from bfr_model.params import RigParams
 __all__ = [
     "RigidModel",
     "curve_terms",
+    "frame_gravity",
+    "joint_torque",
     "mass_terms",
     "rigid_rhs",
     "rigid_rk4_steps",
@@ -192,11 +205,37 @@ def mass_from_curve(px, py, p1x, p1y, p2x, p2y, lam, lam1, P, R):  # noqa: ANN00
 
 
 @njit
+def frame_gravity(st, ct, P):  # noqa: ANN001, ANN201
+    """G1 of the frame's own weight, ``dV_f/dtheta`` (module docstring: frame imbalance).
+
+    ``V_f = g (sin(theta) c M_x + cos(theta) M_y)``, so
+    ``G1_f = g (cos(theta) c M_x - sin(theta) M_y)`` = ``-m_f e g sin(theta - theta_e)``
+    without wobble. Zero for a balanced frame.
+    """
+    return P[I_G] * (ct * P[I_CW] * P[I_MEX] - st * P[I_MEY])
+
+
+@njit
 def gravity_from_curve(st, ct, px, py, p1x, p1y, P):  # noqa: ANN001, ANN202
-    """G = dV/dq with ``V = m g (sin(theta) c p_x + cos(theta) p_y)`` (c: wobble factor)."""
+    """G = dV/dq with ``V = m g (sin(theta) c p_x + cos(theta) p_y) + V_f`` (c: wobble).
+
+    ``V_f`` is the frame's own weight (:func:`frame_gravity`; zero when it is balanced).
+    """
     mg = P[I_M] * P[I_G]
     c = P[I_CW]
-    return mg * (ct * c * px - st * py), mg * (st * c * p1x + ct * p1y)
+    return (mg * (ct * c * px - st * py) + frame_gravity(st, ct, P),
+            mg * (st * c * p1x + ct * p1y))
+
+
+@njit
+def joint_torque(u, theta_dot, P):  # noqa: ANN001, ANN201
+    """Q_theta without the load friction: ``k_u u + tau_0 - c_v th' - T_c tanh(th' / v_c)``.
+
+    The drive's torque (gain and offset) and the joint's viscous and Coulomb friction (module
+    docstring); the one place they are written, for the kernels and the diagnosis residual.
+    """
+    return (P[I_KU] * u + P[I_TAU0] - P[I_CV] * theta_dot
+            - P[I_TC] * np.tanh(theta_dot / P[I_VC]))
 
 
 @njit
@@ -216,7 +255,8 @@ def rigid_terms(theta, phi, theta_dot, phi_dot, u, P, R, rho0, orders, ccos, csi
     -------
     tuple
         ``(theta_ddot, phi_ddot, p_in, p_diss, F_n)``: [rad/s^2], [rad/s^2], motor power
-        ``k_u u theta_dot`` [W], dissipated power [W] (>= 0 while F_n >= 0), normal force [N].
+        ``(k_u u + tau_0) theta_dot`` [W], dissipated power [W] (>= 0 while F_n >= 0), normal
+        force [N].
     """
     m = P[I_M]
     g = P[I_G]
@@ -233,10 +273,10 @@ def rigid_terms(theta, phi, theta_dot, phi_dot, u, P, R, rho0, orders, ccos, csi
     c2 = -0.5 * dm11 * theta_dot * theta_dot + 0.5 * dm22 * phi_dot * phi_dot
     # gravity, V = m g (sin(theta) c p_x + cos(theta) p_y)
     g1, g2 = gravity_from_curve(st, ct, px, py, p1x, p1y, P)
-    # joint: motor gain, viscous and (smoothed) Coulomb friction
+    # joint: motor gain and offset, viscous and (smoothed) Coulomb friction
     sgn_th = np.tanh(theta_dot / P[I_VC])
     tau_f = P[I_CV] * theta_dot + P[I_TC] * sgn_th
-    q1 = P[I_KU] * u - tau_f
+    q1 = joint_torque(u, theta_dot, P)
     # ball acceleration plus g_e y in the shaft's rotating coordinates (3-D, q = W p):
     # r_dd + g y = a0 + a_th theta_dd + a_ph phi_dd,  a_th = z x q,  a_ph = q'
     qx = c * px
@@ -284,7 +324,7 @@ def rigid_terms(theta, phi, theta_dot, phi_dot, u, P, R, rho0, orders, ccos, csi
             phdd = (a11 * b2 - a21 * b1l) / det
         tau_f = tau_f + t_load
     fn = f0 + f_th * thdd + f_ph * phdd
-    p_in = P[I_KU] * u * theta_dot
+    p_in = (P[I_KU] * u + P[I_TAU0]) * theta_dot
     p_diss = tau_f * theta_dot + mu_s * fn * phi_dot
     return thdd, phdd, p_in, p_diss, fn
 
@@ -337,7 +377,10 @@ def energy_terms(theta, phi, theta_dot, phi_dot, P, R, rho0, orders, ccos, csin,
     px, py = curve_terms(phi, P, R, rho0, orders, ccos, csin, bphi, bh, bw)[:2]
     kin = 0.5 * (m11 * theta_dot * theta_dot + 2.0 * m12 * theta_dot * phi_dot
                  + m22 * phi_dot * phi_dot)
-    pot = P[I_M] * P[I_G] * (np.sin(theta) * P[I_CW] * px + np.cos(theta) * py)
+    st = np.sin(theta)
+    ct = np.cos(theta)
+    pot = (P[I_M] * P[I_G] * (st * P[I_CW] * px + ct * py)
+           + P[I_G] * (st * P[I_CW] * P[I_MEX] + ct * P[I_MEY]))
     return kin, pot
 
 
@@ -385,11 +428,9 @@ class RigidModel:
         """G(q) = dV/dq, shape (..., 2) [N m]."""
         g = curve_terms(np.asarray(phi, float), *self.kernel_args)
         th = np.asarray(theta, float)
-        mg = self.P[I_M] * self.P[I_G]
-        c = self.P[I_CW]
         st, ct = np.sin(th), np.cos(th)
-        return np.stack([mg * (ct * c * g[0] - st * g[1]), mg * (st * c * g[2] + ct * g[3])],
-                        -1)
+        g1, g2 = gravity_from_curve(st, ct, g[0], g[1], g[2], g[3], self.P)
+        return np.stack([g1, g2], -1)
 
     # -- state functions -------------------------------------------------------------------
     def accelerations(self, x: ArrayLike, u: float = 0.0) -> tuple[float, float]:

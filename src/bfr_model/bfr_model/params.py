@@ -138,18 +138,37 @@ class FrameParams:
     is not perpendicular to the shaft: a frame point ``(x, y)`` sits at ``(x cos w, y,
     x sin w)`` in the shaft's coordinates and the ball sways along z by ``x sin w`` (the
     seed's eqs. 2.7-2.9). A pitched shaft is ``environment.axis_misalignment`` instead.
+
+    ``imbalance`` = m_f e [kg m] and ``imbalance_angle`` = theta_e [rad]: the frame's centre
+    of mass sits at ``e [sin theta_e, cos theta_e]`` in frame coordinates (theta_e clockwise
+    from the frame's +y axis, like phi), so its potential energy is
+    ``V_f = m_f e g cos(theta - theta_e)`` and gravity puts the torque
+    ``m_f e g sin(theta - theta_e)`` on the frame (a once-per-turn ripple of the torque).
     """
 
     inertia: float = 1.58e-3
     mass: float = 0.1
     contour: ContourParams = field(default_factory=ContourParams)
     wobble: float = 0.0
+    imbalance: float = 0.0
+    imbalance_angle: float = 0.0
 
     def __post_init__(self) -> None:
         positive("frame.inertia", self.inertia)
         nonnegative("frame.mass", self.mass)
         finite("frame.wobble", self.wobble)
         check(abs(self.wobble) < math.pi / 4, "frame.wobble", "must be within (-pi/4, pi/4)")
+        nonnegative("frame.imbalance", self.imbalance)
+        finite("frame.imbalance_angle", self.imbalance_angle)
+
+    @property
+    def imbalance_moment(self) -> tuple[float, float]:
+        """First mass moment of the frame about the shaft in frame coordinates [kg m].
+
+        ``m_f e (sin theta_e, cos theta_e)``: the kernels' form (a frame point's convention).
+        """
+        return (self.imbalance * math.sin(self.imbalance_angle),
+                self.imbalance * math.cos(self.imbalance_angle))
 
 
 @dataclass(frozen=True)
@@ -199,14 +218,24 @@ class JointParams:
 
 @dataclass(frozen=True)
 class ActuatorParams:
-    """Motor: applied torque = torque_gain [-] * command; command clamped to torque_limit [N m]."""
+    """Motor: applied torque = torque_gain [-] * command + torque_offset [N m].
+
+    The command is clamped to torque_limit [N m]. ``torque_offset`` is what the drive applies
+    at zero command (an amplifier or current-sensor offset); at speed it acts like dry
+    friction that depends on the direction of rotation (docs/diagnosis.md).
+    """
 
     torque_gain: float = 1.0
     torque_limit: float = 0.1
+    torque_offset: float = 0.0
 
     def __post_init__(self) -> None:
         positive("actuator.torque_gain", self.torque_gain)
         positive("actuator.torque_limit", self.torque_limit)
+        finite("actuator.torque_offset", self.torque_offset)
+        check(abs(self.torque_offset) < self.torque_limit, "actuator.torque_offset",
+              f"{self.torque_offset} N m must be smaller than the torque limit "
+              f"{self.torque_limit} N m")
 
 
 @dataclass(frozen=True)
@@ -391,8 +420,15 @@ class RigParams:
         bumps that only the contact model (bfr_model.contact) can roll over belong in
         ``track.asperity_*``, which this check (and the rigid model) leaves out.
         """
-        curve = OffsetCurve.from_params(self)
-        lam_min = curve.min_speed()
+        c, t = self.frame.contour, self.track
+        key = (c.a, c.b, c.harmonic_orders, c.harmonic_cos, c.harmonic_sin, t.bump_phi,
+               t.bump_height, t.bump_width, self.ball.rolling_radius)
+        lam_min = _RIGID_CHECKS.get(key)
+        if lam_min is None:  # the same curve is checked once (fits change other entries)
+            lam_min = OffsetCurve.from_params(self).min_speed()
+            if len(_RIGID_CHECKS) > 1024:
+                _RIGID_CHECKS.clear()
+            _RIGID_CHECKS[key] = lam_min
         check(lam_min > 0.0, "frame.contour / track.bump_*",
                "the ball-centre curve has a cusp (a concave part of the track is sharper "
                f"than the rolling radius R = {self.ball.rolling_radius:.4g} m; min |p'| = "
@@ -416,6 +452,8 @@ class RigParams:
 
     def replace(self, **changes: Any) -> RigParams:
         """Return a copy with dotted-name changes, e.g. ``replace(**{"ball.mass": 3e-3})``."""
+        if changes and all(not isinstance(v, (list, tuple, dict)) for v in changes.values()):
+            return _replace_scalars(self, changes)
         d = params_to_dict(self)
         for key, value in changes.items():
             node = d
@@ -428,6 +466,39 @@ class RigParams:
                 raise ParameterError(f"parameter {key}: unknown name {parts[-1]!r}")
             node[parts[-1]] = value
         return params_from_dict(d)
+
+
+#: Smallest arc-length rate of each ball-centre curve checked (:meth:`RigParams.check_rigid`).
+_RIGID_CHECKS: dict[tuple, float] = {}
+
+
+def _replace_scalars(params: Any, changes: dict[str, Any]) -> Any:
+    """:meth:`RigParams.replace` for scalar values: nested ``dataclasses.replace``.
+
+    Every dataclass on the way is rebuilt, so every check of its ``__post_init__`` runs.
+    """
+    here: dict[str, Any] = {}
+    deeper: dict[str, dict[str, Any]] = {}
+    for key, value in changes.items():
+        head, _, rest = key.partition(".")
+        names = {f.name for f in dataclasses.fields(params)}
+        if head not in names:
+            what = "group" if rest else "name"
+            raise ParameterError(f"parameter {key}: unknown {what} {head!r}")
+        if rest:
+            if not dataclasses.is_dataclass(getattr(params, head)):
+                raise ParameterError(f"parameter {key}: unknown group {head!r}")
+            deeper.setdefault(head, {})[rest] = value
+        else:
+            if dataclasses.is_dataclass(getattr(params, head)):
+                raise ParameterError(f"parameter {key}: {head!r} is a group, not a value")
+            here[head] = value
+    for head, sub in deeper.items():
+        here[head] = _replace_scalars(getattr(params, head), sub)
+    try:
+        return dataclasses.replace(params, **here)
+    except TypeError as exc:
+        raise ParameterError(f"parameter {sorted(changes)}: {exc}") from exc
 
 
 def default_params_path() -> Path:

@@ -9,10 +9,14 @@ convert at the edges and write every conversion they applied into ``meta["conver
 Sampling model
 --------------
 ``t`` is the time base of the frame signals (encoder and torque command, one sample per
-control step on the rig). The camera runs slower: ``ball_x``, ``ball_y``, ``ball_valid`` and
-``phi`` hold the **latest** camera fix at each sample (zero-order hold), exactly as a
-controller sees them; :meth:`Recording.new_fix_mask` marks the samples where a new distinct
-fix arrived. Simulated recordings without a camera model have a fix at every sample.
+control step on the rig). The camera runs at its own rate: ``ball_x``, ``ball_y``,
+``ball_valid`` and ``phi`` hold the **latest** camera fix at each sample (zero-order hold),
+exactly as a controller sees them; :meth:`Recording.new_fix_mask` marks the samples where a
+new distinct fix arrived. When the source stamps each fix (a ROS message's header stamp:
+the exposure), ``extra["ball_stamp"]`` holds the held fix's own time [s] on the axis of
+``t``, and :meth:`Recording.fix_times` returns those stamps; otherwise a fix's time is that
+of the sample where it first appears (its arrival). Simulated recordings without a camera
+model have a fix at every sample.
 
 This module is pure numpy (no ``rclpy``).
 """
@@ -255,19 +259,31 @@ class Recording:
     def new_fix_mask(self) -> BoolArray:
         """True at the valid samples where a new, distinct ball fix arrived.
 
-        A sample counts when it is valid and its ``(ball_x, ball_y)`` differs from the
-        previous sample's, or the previous sample was invalid.
+        A sample counts when it is valid and its fix differs from the previous sample's
+        (another ``extra["ball_stamp"]`` when the fixes are stamped, else another
+        ``(ball_x, ball_y)``), or the previous sample was invalid.
         """
         v = self.ball_valid
         new = v.copy()
         if len(self) > 1:
-            same = (self.ball_x[1:] == self.ball_x[:-1]) & (self.ball_y[1:] == self.ball_y[:-1])
+            stamp = self.extra.get("ball_stamp")
+            if stamp is not None:
+                same = stamp[1:] == stamp[:-1]
+            else:
+                same = ((self.ball_x[1:] == self.ball_x[:-1])
+                        & (self.ball_y[1:] == self.ball_y[:-1]))
             new[1:] &= ~(same & v[:-1])
         return new
 
     def fix_times(self) -> FloatArray:
-        """Times [s] of the new distinct ball fixes (see :meth:`new_fix_mask`)."""
-        return self.t[self.new_fix_mask()]
+        """Times [s] of the new distinct ball fixes (see :meth:`new_fix_mask`).
+
+        The fixes' own stamps (``extra["ball_stamp"]``) when the source has them, else the
+        times of the samples where they first appear.
+        """
+        m = self.new_fix_mask()
+        stamp = self.extra.get("ball_stamp")
+        return stamp[m] if stamp is not None else self.t[m]
 
     def camera_fix_rate(self, t_from: float | None = None, t_to: float | None = None) -> float:
         """Rate of new distinct ball fixes [Hz] between two times (default: whole run).
@@ -399,7 +415,9 @@ class Recording:
         for name in OPTIONAL_FIELDS:
             value = getattr(self, name)
             kwargs[name] = None if value is None else lin(value)
-        kwargs["extra"] = {k: lin(v) for k, v in self.extra.items()}
+        # a fix's stamp is held with the fix, like the ball fields
+        kwargs["extra"] = {k: (v[prev] if k == "ball_stamp" and ball == "previous" else lin(v))
+                           for k, v in self.extra.items()}
         meta = copy.deepcopy(self.meta)
         meta["conversions"] = [*meta.get("conversions", []),
                                f"resampled onto a uniform grid, dt = {step!r} s "

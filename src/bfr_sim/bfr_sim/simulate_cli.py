@@ -26,8 +26,9 @@ from bfr_control.controller import OrbitalController, load_controller_config
 from bfr_model.dynamics import RigidModel
 from bfr_model.integrators import IntegrationError
 from bfr_model.io.bag import write_recording_bag
+from bfr_model.io.output import OutputError, atomic_dir, atomic_file, check_new
 from bfr_model.params import ParameterError, RigParams, load_params
-from bfr_model.recording import Recording
+from bfr_model.recording import Recording, RecordingError
 from bfr_model.simulate import simulate, torque_from_csv, write_csv
 
 from bfr_sim.closed_loop import SensorConfig, orbit_initial_state, run_closed_loop
@@ -58,7 +59,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--integrator", default="rk4",
                    help="rk4 (fixed step, default) or a scipy method: DOP853, Radau, LSODA")
     p.add_argument("--params", type=Path, help="parameter YAML (default: bfr_sim rig.yaml)")
-    p.add_argument("--out", type=Path, help="trajectory file: .csv, or .mcap for a ROS 2 bag")
+    p.add_argument("--out", type=Path, help="trajectory file: .csv, or .mcap for a ROS 2 bag "
+                   "(the bag folder is the path without .mcap); written atomically")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing --out (default: refuse)")
     p.add_argument("--json", action="store_true", help="print a JSON summary on stdout")
     cl = p.add_argument_group(
         "closed loop (bfr_control)",
@@ -114,16 +118,9 @@ def simulate_with_controller(args: Any) -> int:
         print(f"bfr simulate: error: {exc}", file=sys.stderr)
         return 2
     if args.out is not None:
-        try:
-            sim = res.to_sim_result(RigidModel(plant))
-            if args.out.suffix == ".mcap":
-                write_recording_bag(args.out.with_suffix(""),
-                                    Recording.from_sim(sim, RigidModel(plant)))
-            else:
-                write_csv(args.out, sim)
-        except OSError as exc:
-            print(f"bfr simulate: error: cannot write {args.out}: {exc}", file=sys.stderr)
-            return 2
+        code = _write_out(args, res.to_sim_result(RigidModel(plant)), RigidModel(plant))
+        if code:
+            return code
     summary = res.summary()
     summary["controller"] = controller.summary()
     if args.json:
@@ -142,9 +139,48 @@ def simulate_with_controller(args: Any) -> int:
     return 0
 
 
+def _out_target(args: argparse.Namespace) -> Path:
+    """The path ``--out`` writes: the file, or for ``.mcap`` the bag folder."""
+    return args.out.with_suffix("") if args.out.suffix == ".mcap" else args.out
+
+
+def _write_out(args: argparse.Namespace, res: Any, model: RigidModel) -> int:
+    """Write the trajectory to ``--out`` atomically; 0, or 2 with one line on stderr."""
+    try:
+        if args.out.suffix == ".mcap":
+            with atomic_dir(_out_target(args), args.force, create=False) as tmp:
+                write_recording_bag(tmp, Recording.from_sim(res, model))
+                # the bag's file is named after its folder
+                (tmp / f"{tmp.name}.mcap").rename(tmp / f"{args.out.stem}.mcap")
+                meta = tmp / "metadata.yaml"
+                meta.write_text(meta.read_text().replace(f"{tmp.name}.mcap",
+                                                         f"{args.out.stem}.mcap"))
+        else:
+            with atomic_file(args.out, args.force) as tmp:
+                write_csv(tmp, res)
+    except (OSError, OutputError, RecordingError) as exc:
+        print(f"bfr simulate: error: cannot write {args.out}: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
+def _check_out(args: argparse.Namespace) -> int:
+    """Refuse an existing ``--out`` before simulating; 0, or 2 with one line."""
+    if args.out is None:
+        return 0
+    try:
+        check_new(_out_target(args), args.force)
+    except OutputError as exc:
+        print(f"bfr simulate: error: {exc}", file=sys.stderr)
+        return 2
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``bfr simulate``; returns the process exit code."""
     args = build_parser().parse_args(argv)
+    if _check_out(args):
+        return 2
     if args.controller:
         return simulate_with_controller(args)
     try:
@@ -159,14 +195,9 @@ def main(argv: list[str] | None = None) -> int:
         print(f"bfr simulate: error: {exc}", file=sys.stderr)
         return 2
     if args.out is not None:
-        try:
-            if args.out.suffix == ".mcap":
-                write_recording_bag(args.out.with_suffix(""), Recording.from_sim(res, model))
-            else:
-                write_csv(args.out, res)
-        except OSError as exc:
-            print(f"bfr simulate: error: cannot write {args.out}: {exc}", file=sys.stderr)
-            return 2
+        code = _write_out(args, res, model)
+        if code:
+            return code
     summary = res.summary()
     if args.json:
         print(json.dumps(summary))

@@ -63,6 +63,11 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
         "main",
         "render a recording (bag, CSV, rig log) as a video of the rig seen from the front",
     ),
+    "read": (
+        "bfr_tools.read",
+        "main",
+        "read recordings and print what each reader used and lost, by cause",
+    ),
     "analyze": (
         "bfr_tools.analysis.cli",
         "main",

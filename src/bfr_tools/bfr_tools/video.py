@@ -41,7 +41,7 @@ from typing import Any
 import cv2
 import numpy as np
 from bfr_model.geometry import OffsetCurve
-from bfr_model.io import read_recording
+from bfr_model.io import account_line, read_recording
 from bfr_model.io.bag import make_typestore, read_bag_messages
 from bfr_model.param_file import ParameterError
 from bfr_model.params import RigParams, load_params
@@ -271,6 +271,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", type=Path, required=True,
                    help="video file to write: .mp4 (mp4v), .avi (MJPG) or .gif")
     p.add_argument("--force", action="store_true", help="replace an existing output file")
+    p.add_argument("--allow-partial", action="store_true",
+                   help="use the recording even when more than 1 %% of its samples could not "
+                        "be read (the read's account on stderr says which)")
     p.add_argument("--fps", type=float, default=None,
                    help="frames per video second (default 30; 15 for a GIF)")
     p.add_argument("--speed", type=float, default=1.0,
@@ -414,9 +417,10 @@ def make_video(args: argparse.Namespace) -> tuple[Path, int, str]:
         raise VideoError(f"{args.recording}: no such recording (file or bag directory)")
     with warnings.catch_warnings(record=True) as caught:  # the reader's notes, one line each
         warnings.simplefilter("always")
-        rec = read_recording(args.recording)
+        rec = read_recording(args.recording, allow_partial=args.allow_partial)
     for w in caught:
         print(f"bfr video: warning: {w.message}", file=sys.stderr)
+    print(f"bfr video: {account_line([rec])}", file=sys.stderr)
     t0, t1 = _window(rec, args.start, args.end)
     note = ""
     gif = kind == "gif"

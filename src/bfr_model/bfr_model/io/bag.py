@@ -30,8 +30,10 @@ role                topic                               type
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import json
+import math
 import os
 import time
 import warnings
@@ -42,22 +44,26 @@ from typing import Any, BinaryIO
 
 import numpy as np
 import yaml
-from mcap.exceptions import EndOfFile, InvalidMagic, McapError
+from mcap.exceptions import EndOfFile, InvalidMagic
+from mcap.reader import make_reader
 from mcap.records import (
     Attachment,
     Channel,
-    DataEnd,
+    Chunk,
+    ChunkIndex,
     Footer,
     Message,
+    MessageIndex,
     Metadata,
     Schema,
 )
-from mcap.stream_reader import StreamReader
+from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 from numpy.typing import NDArray
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
 from bfr_model.param_file import ParameterError, share_path
 from bfr_model.recording import Recording, RecordingError
 
@@ -446,7 +452,9 @@ def write_recording_bag(path: str | Path, recording: Recording,
     - ``command``: ``Float64MultiArray`` with ``data = [torque]``;
     - ``ball``: ``BallObservation`` (frame ``world``) whenever the held fix or its validity
       changes: ``x, y, phi``, ``theta_used = phi - atan2(x, y)``, ``status`` FOUND or
-      NOT_FOUND; pixel fields NaN;
+      NOT_FOUND; pixel fields NaN; its header stamp is the fix's own time
+      (``extra["ball_stamp"]``, e.g. the exposure) when the recording has one, else ``t[k]``
+      (the log time is ``t[k]``, its arrival);
     - ``truth`` (simulation only): ``SimTruth`` with the ground-truth state, ball centre,
       torque and energies (unknown fields NaN);
     - ``controller`` (when ``phi_dot`` exists): ``ControllerState`` carrying ``phi_dot``.
@@ -497,6 +505,7 @@ def write_recording_bag(path: str | Path, recording: Recording,
             ball_change[1:] = ~same
         truth = rec.has_truth
         nan = float("nan")
+        fix_stamp = rec.extra.get("ball_stamp")
         for k in range(n):
             stamp = _stamp(store, int(ns[k]))
             ts = int(ns[k])
@@ -509,7 +518,10 @@ def write_recording_bag(path: str | Path, recording: Recording,
             if ball_change[k]:
                 valid = bool(rec.ball_valid[k])
                 x, y, ph = (float(rec.ball_x[k]), float(rec.ball_y[k]), float(rec.phi[k]))
-                obs = ball_t(header=header_t(stamp=stamp, frame_id="world"),
+                own = (fix_stamp[k] if fix_stamp is not None and np.isfinite(fix_stamp[k])
+                       else rec.t[k])
+                obs = ball_t(header=header_t(stamp=_stamp(store, round(own * _NS)),
+                                             frame_id="world"),
                              status=ball_t.FOUND if valid else ball_t.NOT_FOUND, valid=valid,
                              confidence=1.0 if valid else 0.0, u=nan, v=nan, radius_px=nan,
                              x=x if valid else nan, y=y if valid else nan,
@@ -590,11 +602,19 @@ class RawMessage:
     msgtype: str
     log_time: int
     data: bytes
+    sequence: int = -1
 
 
 @dataclass
 class BagContents:
-    """Raw messages of a bag plus its definitions, metadata and problems."""
+    """Raw messages of a bag plus its definitions, metadata and problems.
+
+    ``lost`` counts the messages known to be in the bag but not readable, per topic and
+    cause (``corrupt``: a chunk failing its CRC or unparseable; ``truncated``: past the end
+    of what could be read); ``lost_exact`` is False when a count is estimated from the
+    bytes lost (a bag cut without its summary or metadata.yaml). ``span_ns`` is the log-time
+    span of all messages the bag held, when an index says it.
+    """
 
     path: Path
     storage: str
@@ -604,6 +624,9 @@ class BagContents:
     attachments: dict[str, bytes]
     warnings: list[str]
     complete: bool
+    lost: dict[str, dict[str, int]] = field(default_factory=dict)
+    lost_exact: bool = True
+    span_ns: int | None = None
 
 
 def _locate(path: Path) -> tuple[str, Path, dict[str, Any] | None]:
@@ -622,10 +645,10 @@ def _locate(path: Path) -> tuple[str, Path, dict[str, Any] | None]:
         try:
             meta = yaml.safe_load(mfile.read_text(encoding="utf-8"))
             info = meta["rosbag2_bagfile_information"]
-        except (yaml.YAMLError, KeyError, TypeError) as exc:
+            storage = str(info.get("storage_identifier", ""))
+            files = [path / str(f) for f in info.get("relative_file_paths", [])]
+        except (yaml.YAMLError, KeyError, TypeError, AttributeError, UnicodeDecodeError) as exc:
             raise BagError(f"{mfile}: unreadable metadata.yaml: {exc}") from exc
-        storage = str(info.get("storage_identifier", ""))
-        files = [path / f for f in info.get("relative_file_paths", [])]
         if storage == "sqlite3":
             return "sqlite3", path, meta
         if storage == "mcap":
@@ -644,65 +667,216 @@ def _locate(path: Path) -> tuple[str, Path, dict[str, Any] | None]:
     raise BagError(f"{path}: no metadata.yaml and {len(mcaps)} .mcap files (need exactly one)")
 
 
-def _read_mcap(path: Path) -> BagContents:
+def _summary(fh: BinaryIO) -> tuple[Any, list[ChunkIndex]] | None:
+    """The MCAP summary's statistics and chunk indexes, None when it cannot be read."""
+    try:
+        fh.seek(0)
+        summary = make_reader(fh, validate_crcs=True).get_summary()
+    except Exception:  # noqa: BLE001 - no footer, bad magic, a damaged summary: none then
+        return None
+    if summary is None or summary.statistics is None:
+        return None
+    return summary.statistics, sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
 
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    msgs: list[RawMessage] = []
-    metadata: dict[str, dict[str, str]] = {}
-    attachments: dict[str, bytes] = {}
-    warns: list[str] = []
-    complete = False
+
+@dataclass(kw_only=True)
+class _McapWalk:
+    """State of a walk over the records of an MCAP file, chunk by chunk (mutable).
+
+    Attributes
+    ----------
+    schemas, channels : dict
+        Records by id.
+    pending : list of Message
+        Messages of intact chunks (and unchunked ones), in file order.
+    metadata, attachments : dict
+        Metadata and attachment records by name.
+    corrupt : dict of int to int
+        Messages per channel id in chunks that failed their CRC or could not be parsed
+        (counted from the message index records after each chunk).
+    failures : list of str
+        What went wrong where.
+    footer : bool
+        The footer was reached.
+    stopped_at : int or None
+        Byte offset where the framing broke (the walk resumes at the next indexed chunk).
+    end_of_file : bool
+        The walk stopped because the file ended inside a record.
+    """
+
+    schemas: dict[int, Schema] = field(default_factory=dict)
+    channels: dict[int, Channel] = field(default_factory=dict)
+    pending: list[Message] = field(default_factory=list)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    attachments: dict[str, bytes] = field(default_factory=dict)
+    corrupt: dict[int, int] = field(default_factory=dict)
+    failures: list[str] = field(default_factory=list)
+    footer: bool = False
+    stopped_at: int | None = None
+    end_of_file: bool = False
+    bad_chunk: bool = False
+
+    def record(self, rec: Any, where: int) -> None:
+        """Take one top-level record."""
+        if isinstance(rec, Chunk):
+            self.bad_chunk = False
+            try:
+                inner = breakup_chunk(rec, validate_crc=True)
+            except Exception as exc:  # noqa: BLE001 - CRC, decompression, struct errors
+                self.bad_chunk = True
+                self.failures.append(f"corrupt chunk at byte ~{where} ({type(exc).__name__}: "
+                                     f"{exc}); skipped")
+                return
+            for r in inner:
+                self.record(r, where)
+            return
+        if isinstance(rec, MessageIndex):
+            if self.bad_chunk:
+                self.corrupt[rec.channel_id] = (self.corrupt.get(rec.channel_id, 0)
+                                                + len(rec.records))
+            return
+        self.bad_chunk = False
+        if isinstance(rec, Schema):
+            self.schemas[rec.id] = rec
+        elif isinstance(rec, Channel):
+            self.channels[rec.id] = rec
+        elif isinstance(rec, Message):
+            self.pending.append(rec)
+        elif isinstance(rec, Metadata):
+            self.metadata[rec.name] = dict(rec.metadata)
+        elif isinstance(rec, Attachment):
+            self.attachments[rec.name] = bytes(rec.data)
+        elif isinstance(rec, Footer):
+            self.footer = True
+
+    def walk(self, fh: BinaryIO, start: int, size: int) -> None:
+        """Read records from byte ``start`` until the footer or the first broken frame."""
+        fh.seek(start)
+        reader = StreamReader(fh, skip_magic=start > 0, emit_chunks=True, validate_crcs=False,
+                              record_size_limit=size)
+        where = start
+        try:
+            for rec in reader.records:
+                self.record(rec, where)
+                where = fh.tell()
+        except InvalidMagic as exc:
+            if self.footer:
+                self.failures.append(f"bad magic at the end ({exc})")
+            else:
+                raise
+        except Exception as exc:  # noqa: BLE001 - EndOfFile, struct, limits, bad opcodes
+            if where >= size and isinstance(exc, (EndOfFile, EOFError)):
+                self.failures.append(f"no footer (the writer did not finish): read to the "
+                                     f"last intact chunk, all {size} bytes; what followed it "
+                                     f"is unknown")
+                return
+            self.stopped_at = where
+            self.end_of_file = isinstance(exc, (EndOfFile, EOFError))
+            what = ("file ends inside a record (truncated)" if self.end_of_file
+                    else f"{type(exc).__name__}: {exc}")
+            self.failures.append(f"truncated or corrupt at byte ~{where} of {size} ({what})")
+
+
+def _yaml_counts(meta: dict[str, Any] | None) -> dict[str, int] | None:
+    """Messages per topic listed in metadata.yaml (None without one)."""
+    if not meta:
+        return None
+    try:
+        topics = meta["rosbag2_bagfile_information"]["topics_with_message_count"]
+        return {str(t["topic_metadata"]["name"]): int(t["message_count"]) for t in topics}
+    except (KeyError, TypeError, ValueError):
+        return None
+
+
+def _read_mcap(path: Path, yaml_meta: dict[str, Any] | None = None) -> BagContents:
+    """Read an MCAP file chunk by chunk, skipping what is damaged and counting it.
+
+    A chunk failing its CRC is skipped and its messages counted from the message index
+    records that follow it. Where the framing breaks (a damaged record length, the end of
+    a cut file), the walk resumes at the next chunk of the summary's index when the file
+    has one. Messages the bag held but that could not be read are counted per topic from
+    the summary's statistics, else metadata.yaml, else estimated from the bytes not read.
+    """
     size = path.stat().st_size
     if size == 0:
         raise BagError(f"{path}: empty file (0 bytes)")
-    pending: list[Message] = []
+    walk = _McapWalk()
     with path.open("rb") as fh:
-        reader = StreamReader(fh, skip_magic=False, validate_crcs=True)
+        summary = _summary(fh)
         try:
-            for rec in reader.records:
-                if isinstance(rec, Schema):
-                    schemas[rec.id] = rec
-                elif isinstance(rec, Channel):
-                    channels[rec.id] = rec
-                elif isinstance(rec, Message):
-                    pending.append(rec)
-                elif isinstance(rec, Metadata):
-                    metadata[rec.name] = dict(rec.metadata)
-                elif isinstance(rec, Attachment):
-                    attachments[rec.name] = bytes(rec.data)
-                elif isinstance(rec, DataEnd):
-                    pass
-                elif isinstance(rec, Footer):
-                    complete = True
+            walk.walk(fh, 0, size)
         except InvalidMagic as exc:
-            if not pending and not channels:
-                raise BagError(f"{path}: not an MCAP file ({exc})") from exc
-            warns.append(f"{path}: bad magic at the end: {exc}")
-        except (McapError, EOFError, ValueError, KeyError, IndexError, OSError) as exc:
-            what = "file ends inside a record (truncated)" if isinstance(exc, EndOfFile) \
-                else f"{type(exc).__name__}: {exc}"
-            warns.append(f"{path}: truncated or corrupt at byte ~{fh.tell()} of {size} "
-                         f"({what}); kept {len(pending)} message(s) from the complete "
-                         f"chunks before it")
-        except Exception as exc:  # noqa: BLE001 - struct.error, zlib errors, ...
-            warns.append(f"{path}: unreadable after byte ~{fh.tell()} of {size} "
-                         f"({type(exc).__name__}: {exc}); kept {len(pending)} message(s)")
-    if not complete and not warns:
-        warns.append(f"{path}: no footer (writer did not finish); read what was there")
-    for m in pending:
-        ch = channels.get(m.channel_id)
+            raise BagError(f"{path}: not an MCAP file ({exc})") from exc
+        read_to = walk.stopped_at if walk.stopped_at is not None else size
+        while walk.stopped_at is not None and summary is not None:
+            after = [c.chunk_start_offset for c in summary[1]
+                     if c.chunk_start_offset > walk.stopped_at]
+            if not after:
+                break
+            walk.failures.append(f"resumed at the next indexed chunk, byte {after[0]}")
+            walk.stopped_at = None
+            walk.walk(fh, after[0], size)
+    msgs: list[RawMessage] = []
+    for m in walk.pending:
+        ch = walk.channels.get(m.channel_id)
         if ch is None:
-            warns.append(f"{path}: message on unknown channel {m.channel_id} skipped")
+            walk.failures.append(f"message on unknown channel {m.channel_id} skipped")
             continue
-        sc = schemas.get(ch.schema_id)
+        sc = walk.schemas.get(ch.schema_id)
         msgs.append(RawMessage(topic=ch.topic, msgtype=sc.name if sc else "",
-                               log_time=int(m.log_time), data=bytes(m.data)))
-    defs = {sc.name: sc.data.decode("utf-8", errors="replace") for sc in schemas.values()
+                               log_time=int(m.log_time), data=bytes(m.data),
+                               sequence=int(m.sequence)))
+    read: dict[str, int] = {}
+    for m in msgs:
+        read[m.topic] = read.get(m.topic, 0) + 1
+    corrupt = {walk.channels[c].topic if c in walk.channels else f"channel {c}": k
+               for c, k in walk.corrupt.items()}
+    lost, exact, span = _lost_messages(walk, summary, _yaml_counts(yaml_meta), read, corrupt,
+                                       read_to, size)
+    warns = [f"{path}: {f}" for f in walk.failures]
+    if not walk.footer and not walk.failures:
+        warns.append(f"{path}: no footer (writer did not finish); read to the last intact "
+                     f"chunk (all {size} bytes)")
+    defs = {sc.name: sc.data.decode("utf-8", errors="replace") for sc in walk.schemas.values()
             if sc.encoding == "ros2msg"}
     return BagContents(path=path, storage="mcap", messages=msgs, schemas=defs,
-                       metadata=metadata, attachments=attachments, warnings=warns,
-                       complete=complete and not warns)
+                       metadata=walk.metadata, attachments=walk.attachments, warnings=warns,
+                       complete=walk.footer and not warns, lost=lost, lost_exact=exact,
+                       span_ns=span)
+
+
+def _lost_messages(walk: _McapWalk, summary: Any, yaml_counts: dict[str, int] | None,
+                   read: dict[str, int], corrupt: dict[str, int], read_to: int,
+                   size: int) -> tuple[dict[str, dict[str, int]], bool, int | None]:
+    """Messages lost per topic and cause, whether the counts are exact, the bag's span."""
+    tail = "truncated" if walk.end_of_file else "corrupt"
+    known: dict[str, int] | None = None
+    span = None
+    if summary is not None:
+        stats = summary[0]
+        known = {walk.channels[c].topic: k for c, k in stats.channel_message_counts.items()
+                 if c in walk.channels}
+        span = int(stats.message_end_time - stats.message_start_time)
+    elif yaml_counts is not None:
+        known = yaml_counts
+    lost: dict[str, dict[str, int]] = {}
+    for topic, k in corrupt.items():
+        lost.setdefault(topic, {})["corrupt"] = k
+    if known is not None:
+        for topic, total in known.items():
+            rest = total - read.get(topic, 0) - corrupt.get(topic, 0)
+            if rest > 0:
+                lost.setdefault(topic, {})[tail] = lost.get(topic, {}).get(tail, 0) + rest
+        return lost, True, span
+    exact = walk.footer  # without footer nor index nothing says what followed the cut
+    if read_to < size and read:
+        exact = False
+        frac = (size - read_to) / max(read_to, 1)
+        for topic, k in read.items():
+            est = math.ceil(k * frac)
+            if est:
+                lost.setdefault(topic, {})[tail] = lost.get(topic, {}).get(tail, 0) + est
+    return lost, exact, span
 
 
 def _read_sqlite(path: Path) -> BagContents:
@@ -723,7 +897,7 @@ def _read_sqlite(path: Path) -> BagContents:
 
 
 def read_bag_messages(path: str | Path) -> BagContents:
-    """All raw messages of a bag (directory, ``.mcap`` or ``.db3``), tolerant of truncation.
+    """All raw messages of a bag (directory, ``.mcap`` or ``.db3``), tolerant of damage.
 
     Raises
     ------
@@ -731,8 +905,8 @@ def read_bag_messages(path: str | Path) -> BagContents:
         If the path is not a bag or nothing can be read.
     """
     p = Path(path)
-    storage, target, _ = _locate(p)
-    return _read_mcap(target) if storage == "mcap" else _read_sqlite(target)
+    storage, target, meta = _locate(p)
+    return _read_mcap(target, meta) if storage == "mcap" else _read_sqlite(target)
 
 
 def _zoh(src_ns: NDArray[np.int64], values: NDArray[Any], at_ns: NDArray[np.int64],
@@ -782,10 +956,19 @@ def _warn_or_raise(problems: list[str], strict: bool) -> None:
 
 
 def _bag_typestore(contents: BagContents, msg_dirs: list[str | Path] | None) -> Any:
-    """The typestore of ``msg_dirs``, plus the bag's embedded definitions of unknown types."""
-    store = make_typestore(msg_dirs)
+    """A typestore for this bag alone: its embedded definitions first, then ``msg_dirs``.
+
+    The ROS 2 Jazzy standard types, then every type whose definition the bag embeds (what
+    its messages were serialised with), then the ``.msg`` files found for types the bag
+    does not define. A fresh store per bag: one bag's definitions never leak into another.
+    """
+    store = get_typestore(Stores.ROS2_JAZZY)
     for msgtype, text in contents.schemas.items():
         _register_from_schema(store, msgtype, text)
+    shared = make_typestore(msg_dirs)
+    missing = {k: v for k, v in shared.fielddefs.items() if k not in store.fielddefs}
+    if missing:
+        store.register(missing)
     return store
 
 
@@ -796,14 +979,21 @@ def _messages_by_role(contents: BagContents,
     Raises
     ------
     BagError
-        No message on the ``joint_states`` topic (the time base).
+        A topic of a role carries another type than the topic contract's (one line naming
+        the topic, the type found and the type expected), or no message on the
+        ``joint_states`` topic (the time base).
     """
     by_role: dict[str, list[RawMessage]] = {r: [] for r in names}
     role_of = {v: k for k, v in names.items()}
     for m in contents.messages:
         role = role_of.get(m.topic.lstrip("/"))
-        if role is not None:
-            by_role[role].append(m)
+        if role is None:
+            continue
+        if m.msgtype != _TYPES[role]:
+            raise BagError(f"{contents.path}: topic {m.topic!r} carries {m.msgtype or '?'!r}, "
+                           f"expected {_TYPES[role]!r} (role {role!r}; remap with --topic "
+                           f"{role}=TOPIC if another topic has it)")
+        by_role[role].append(m)
     if not by_role["joint_states"]:
         topics = sorted({m.topic for m in contents.messages})
         why = f" ({'; '.join(contents.warnings)})" if contents.warnings else ""
@@ -827,6 +1017,22 @@ class _Decoder:
             raise BagError(f"{self.path}: cannot decode a {m.msgtype} message on "
                            f"{m.topic!r} at {m.log_time} ns: {exc}") from exc
 
+    def all(self, msgs: list[RawMessage], notes: list[str]) -> tuple[list[Any], list[int]]:
+        """The messages that decode (and their indices); the others counted in ``notes``."""
+        out: list[Any] = []
+        idx: list[int] = []
+        first = None
+        for i, m in enumerate(msgs):
+            try:
+                out.append(self.store.deserialize_cdr(m.data, m.msgtype))
+                idx.append(i)
+            except Exception as exc:  # noqa: BLE001 - any decoding failure is a corrupt message
+                first = first or f"{m.log_time} ns ({type(exc).__name__})"
+        if len(out) < len(msgs):
+            notes.append(f"{msgs[0].topic}: {len(msgs) - len(out)} message(s) do not decode "
+                         f"(corrupt), first at {first}: skipped")
+        return out, idx
+
 
 @dataclass(frozen=True, kw_only=True)
 class _JointStates:
@@ -835,11 +1041,15 @@ class _JointStates:
     Attributes
     ----------
     stamp : ndarray of int
-        Header stamps [ns], sorted, without duplicates.
+        Header stamps [ns], sorted, of the samples the gates kept.
     offset : int
         Median of log time minus header stamp [ns]: maps log times to the header clock.
     theta, theta_dot, effort : ndarray
         Position [rad], velocity [rad/s] and effort [N m] of the frame joint.
+    sequence : ndarray of int
+        Each kept sample's sequence number on its topic (-1 when unknown).
+    account : dict
+        ``present``, ``dropped`` (by cause), ``first`` (stamp [ns] per cause) and ``actions``.
     """
 
     stamp: NDArray[np.int64]
@@ -847,6 +1057,8 @@ class _JointStates:
     theta: NDArray[np.float64]
     theta_dot: NDArray[np.float64]
     effort: NDArray[np.float64]
+    sequence: NDArray[np.int64]
+    account: dict[str, Any]
 
 
 def _joint_value(seq: Any, j: int) -> float:
@@ -854,41 +1066,60 @@ def _joint_value(seq: Any, j: int) -> float:
     return float(seq[j]) if len(seq) > j else float("nan")
 
 
-def _sorted_unique(stamp: NDArray[np.int64], notes: list[str]) -> NDArray[np.intp]:
-    """Indices sorting ``stamp`` (stable), of each repeated stamp only the first."""
-    order = np.argsort(stamp, kind="stable")
-    keep = np.ones(order.size, bool)
-    keep[1:] = np.diff(stamp[order]) > 0
-    if not keep.all() or not np.all(order == np.arange(order.size)):
-        notes.append(f"joint_states: sorted by stamp, {int((~keep).sum())} duplicate stamp(s) "
-                     f"dropped")
-    return order[keep]
-
-
-def _read_joint_states(msgs: list[RawMessage], decode: _Decoder,
-                       notes: list[str]) -> _JointStates:
+def _read_joint_states(msgs: list[RawMessage], decode: _Decoder, notes: list[str],
+                       gates: Gates | None) -> _JointStates:
     """Decode ``joint_states``: the time base and the frame joint (index 0 if not named).
 
-    A missing velocity is replaced by the numerical derivative of the position.
+    Messages are sorted by header stamp (a bag logs them in arrival order; reordering
+    loses nothing), then the physical gates drop what no hardware makes
+    (:func:`bfr_model.io.account.gate_samples`). A missing velocity is replaced by the
+    numerical derivative of the position.
+
+    Raises
+    ------
+    BagError
+        No message decodes, or none passes the gates.
     """
-    js = [decode(m) for m in msgs]
+    js, idx = decode.all(msgs, notes)
+    corrupt = len(msgs) - len(js)
+    if not js:
+        raise BagError(f"{decode.path}: no {msgs[0].topic!r} message decodes ({len(msgs)} "
+                       f"present)")
+    raw = [msgs[i] for i in idx]
     stamp = _header_ns(js)
-    order = _sorted_unique(stamp, notes)
-    js, stamp = [js[i] for i in order], stamp[order]
-    offset = int(np.median(_log_ns(msgs, 0)[order] - stamp))
+    order = np.argsort(stamp, kind="stable")
+    actions: list[str] = []
+    if not np.all(order == np.arange(order.size)):
+        actions.append(f"joint_states: {int(np.count_nonzero(np.diff(stamp) < 0))} message(s) "
+                       f"logged before an earlier stamp: sorted by header stamp (nothing lost)")
+    js, raw, stamp = [js[i] for i in order], [raw[i] for i in order], stamp[order]
     first = js[0].name
     j = first.index(FRAME_JOINT) if FRAME_JOINT in first else 0
     if FRAME_JOINT not in first:
         notes.append(f"joint_states: no {FRAME_JOINT!r} joint; used index 0 ({first[:1]})")
     theta = np.array([_joint_value(s.position, j) for s in js])
     theta_dot = np.array([_joint_value(s.velocity, j) for s in js])
-    if np.isnan(theta_dot).any():
+    if np.isnan(theta_dot).all():
         ts_s = stamp / _NS
-        theta_dot = np.where(np.isnan(theta_dot),
-                             np.gradient(theta, ts_s) if len(js) > 1 else 0.0, theta_dot)
+        theta_dot = np.gradient(theta, ts_s) if len(js) > 1 else np.zeros(len(js))
         notes.append("theta_dot: joint_states without velocity; numerical derivative used")
-    return _JointStates(stamp=stamp, offset=offset, theta=theta, theta_dot=theta_dot,
-                        effort=np.array([_joint_value(s.effort, j) for s in js]))
+    effort = np.array([_joint_value(s.effort, j) for s in js])
+    g = gate_samples(stamp.astype(np.float64) / _NS, theta, theta_dot,
+                     np.nan_to_num(effort, nan=0.0), gates=gates)
+    keep = g.keep
+    if not keep.any():
+        raise BagError(f"{decode.path}: no joint_states sample passes the checks "
+                       f"({g.dropped})")
+    offset = int(np.median(_log_ns(raw, 0)[keep] - stamp[keep]))
+    dropped = dict(g.dropped)
+    if corrupt:
+        dropped["corrupt"] = dropped.get("corrupt", 0) + corrupt
+    actions += g.actions(lambda i: f"stamp {stamp[i] / _NS:.6f} s")
+    seq = np.array([m.sequence for m in raw], dtype=np.int64)
+    return _JointStates(stamp=stamp[keep], offset=offset, theta=theta[keep],
+                        theta_dot=theta_dot[keep], effort=effort[keep], sequence=seq[keep],
+                        account={"present": len(msgs), "dropped": dropped, "actions": actions,
+                                 "span": float(stamp[-1] - stamp[0]) / _NS})
 
 
 def _torque(js: _JointStates, cmds: list[RawMessage], decode: _Decoder,
@@ -896,8 +1127,10 @@ def _torque(js: _JointStates, cmds: list[RawMessage], decode: _Decoder,
     """The latest command at each sample; joint effort before it, 0 where neither is known."""
     torque = js.effort.copy()
     if cmds:
+        dec, idx = decode.all(cmds, notes)
+        cmds = [cmds[i] for i in idx]
         held, have = _hold(_log_ns(cmds, js.offset),
-                           np.array([_first(decode(m).data) for m in cmds]), js.stamp)
+                           np.array([_first(c.data) for c in dec]), js.stamp)
         torque = np.where(have, held, js.effort)
         if not have.all():
             notes.append(f"torque: joint_states effort used for {int((~have).sum())} sample(s) "
@@ -928,21 +1161,37 @@ class _BallFields:
     y: NDArray[np.float64]
     phi: NDArray[np.float64]
     valid: NDArray[np.bool_]
+    stamp_ns: NDArray[np.float64]   # the held observation's own time [ns] (NaN before one)
 
 
 def _ball_fields(js: _JointStates, obs_msgs: list[RawMessage], decode: _Decoder,
                  notes: list[str]) -> _BallFields:
-    """Hold the latest ball observation (by log time) at each sample.
+    """Hold the latest ball observation, placed at its header stamp, at each sample.
 
-    A valid observation without ``phi`` gets ``theta + atan2(x, y)``.
+    An observation's header stamp is the time of the image it was measured in (the topic
+    contract: the exposure); an observation without one (a zero stamp) is placed at its
+    receive (log) time mapped to the header clock, and the notes say how many. A valid
+    observation without ``phi`` gets ``theta + atan2(x, y)``.
     """
     n = js.stamp.size
     if not obs_msgs:
         return _BallFields(x=np.full(n, np.nan), y=np.full(n, np.nan), phi=np.full(n, np.nan),
-                           valid=np.zeros(n, bool))
-    vals = np.array([[b.x, b.y, b.phi, 1.0 if b.valid else 0.0]
-                     for b in (decode(m) for m in obs_msgs)])
-    sel, have = _hold(_log_ns(obs_msgs, js.offset), vals, js.stamp)
+                           valid=np.zeros(n, bool), stamp_ns=np.full(n, np.nan))
+    obs, idx = decode.all(obs_msgs, notes)
+    obs_msgs = [obs_msgs[i] for i in idx]
+    if not obs:
+        return _BallFields(x=np.full(n, np.nan), y=np.full(n, np.nan), phi=np.full(n, np.nan),
+                           valid=np.zeros(n, bool), stamp_ns=np.full(n, np.nan))
+    vals = np.array([[b.x, b.y, b.phi, 1.0 if b.valid else 0.0] for b in obs])
+    placed = _header_ns(obs)
+    unstamped = placed <= 0
+    if unstamped.any():
+        placed = np.where(unstamped, _log_ns(obs_msgs, js.offset), placed)
+        notes.append(f"ball: {int(unstamped.sum())} of {len(obs)} observation(s) carry no "
+                     "header stamp: placed at their receive time (on the header clock)")
+    notes.append(f"ball: {int((~unstamped).sum())} observation(s) placed at their header "
+                 "stamp (the image's time)")
+    sel, have = _hold(placed, np.column_stack([vals, placed.astype(np.float64)]), js.stamp)
     valid = have & (sel[:, 3] > 0) & np.isfinite(sel[:, 0]) & np.isfinite(sel[:, 1])
     ball_x = np.where(valid, sel[:, 0], np.nan)
     ball_y = np.where(valid, sel[:, 1], np.nan)
@@ -951,7 +1200,8 @@ def _ball_fields(js: _JointStates, obs_msgs: list[RawMessage], decode: _Decoder,
     if bad_phi.any():
         phi[bad_phi] = js.theta[bad_phi] + np.arctan2(ball_x[bad_phi], ball_y[bad_phi])
         notes.append("ball: phi missing in some observations; theta + atan2(x, y) used")
-    return _BallFields(x=ball_x, y=ball_y, phi=phi, valid=valid)
+    return _BallFields(x=ball_x, y=ball_y, phi=phi, valid=valid,
+                       stamp_ns=np.where(have, sel[:, 4], np.nan))
 
 
 #: ``Recording`` field per ``SimTruth`` field read from the ``truth`` topic.
@@ -968,11 +1218,12 @@ def _optional_fields(js: _JointStates, by_role: dict[str, list[RawMessage]],
     """
     out: dict[str, NDArray[np.float64]] = {}
     if by_role["controller"]:
-        cs = [decode(m) for m in by_role["controller"]]
+        cs, _ = decode.all(by_role["controller"], [])
         held, have = _hold(_header_ns(cs), np.array([c.phi_dot for c in cs]), js.stamp)
         out["phi_dot"] = np.where(have, held, np.nan)
     if by_role["truth"]:
-        tr = [decode(m) for m in by_role["truth"]]
+        tr, _ = decode.all(by_role["truth"], [])
+    if by_role["truth"] and tr:
         table = np.array([[getattr(s, f) for f in _TRUTH_FIELDS.values()] for s in tr])
         held, have = _hold(_header_ns(tr), table, js.stamp)
         for c, name in enumerate(_TRUTH_FIELDS):
@@ -1005,14 +1256,23 @@ def _bag_meta(contents: BagContents, source: Path, names: dict[str, str],
     """``Recording.meta``: the stored ``bfr_recording`` metadata updated with this read.
 
     Provenance, storage, topics, time origin, and the bag's warnings and ``notes`` appended
-    to those stored.
+    to those stored. Stored metadata that is not a JSON object is ignored, and said.
     """
     meta: dict[str, Any] = {}
     if _META_NAME in contents.metadata:
         try:
-            meta = json.loads(contents.metadata[_META_NAME].get("meta", "{}"))
+            stored = json.loads(contents.metadata[_META_NAME].get("meta", "{}"))
         except json.JSONDecodeError:
+            stored = None
             notes.append("bag: bfr_recording metadata is not valid JSON; ignored")
+        if isinstance(stored, dict):
+            meta = stored
+        elif stored is not None:
+            notes.append(f"bag: bfr_recording metadata is a JSON {type(stored).__name__}, not "
+                         f"an object; ignored")
+    for key in ("notes", "warnings", "conversions"):
+        if not isinstance(meta.get(key, []), list):
+            meta[key] = [str(meta[key])]
     original_source = meta.get("source")
     meta["source"] = str(source)
     meta["source_kind"] = "bag" if not meta.get("source_kind") else meta["source_kind"]
@@ -1027,28 +1287,82 @@ def _bag_meta(contents: BagContents, source: Path, names: dict[str, str],
     return meta
 
 
-def _extra_arrays(contents: BagContents, n: int) -> dict[str, np.ndarray]:
-    """The ``extra`` arrays of the bag's attachment, those of shape ``(n,)`` only."""
+def _extra_arrays(contents: BagContents, js: _JointStates,
+                  notes: list[str]) -> dict[str, np.ndarray]:
+    """The ``extra`` arrays of the bag's attachment, on the samples kept.
+
+    The attachment holds one value per sample written; ``joint_states`` message ``k``
+    (its sequence number) is sample ``k``, so the arrays follow the samples kept whatever
+    was dropped. An array that does not fit is left out, and said.
+    """
     extra: dict[str, np.ndarray] = {}
-    if _EXTRA_ATTACHMENT in contents.attachments:
-        with np.load(io.BytesIO(contents.attachments[_EXTRA_ATTACHMENT])) as npz:
-            for k in npz.files:
-                if npz[k].shape == (n,):
-                    extra[k] = npz[k]
+    if _EXTRA_ATTACHMENT not in contents.attachments:
+        return extra
+    try:
+        npz = np.load(io.BytesIO(contents.attachments[_EXTRA_ATTACHMENT]))
+    except Exception as exc:  # noqa: BLE001 - a damaged attachment
+        notes.append(f"bag: extra arrays attachment unreadable ({type(exc).__name__}); ignored")
+        return extra
+    seq = js.sequence
+    with npz:
+        for k in npz.files:
+            arr = npz[k]
+            if arr.ndim == 1 and seq.size and seq.min() >= 0 and seq.max() < arr.shape[0]:
+                extra[k] = arr[seq]
+            else:
+                notes.append(f"bag: extra array {k!r} (shape {arr.shape}) does not match the "
+                             f"{seq.size} samples kept; left out")
     return extra
+
+
+def _account(contents: BagContents, names: dict[str, str], js: _JointStates,
+             ball_off: int, t: NDArray[np.float64]) -> ReadAccount:
+    """The read's account on the time base (``joint_states`` samples)."""
+    topic_lost: dict[str, int] = {}
+    for topic, by_cause in contents.lost.items():
+        if topic.lstrip("/") == names["joint_states"]:
+            for cause, k in by_cause.items():
+                topic_lost[cause] = topic_lost.get(cause, 0) + k
+    dropped = dict(js.account["dropped"])
+    for cause, k in topic_lost.items():
+        dropped[cause] = dropped.get(cause, 0) + k
+    others = [f"{topic}: {k} {cause}" for topic, by_cause in contents.lost.items()
+              if topic.lstrip("/") != names["joint_states"] for cause, k in by_cause.items()]
+    actions = list(js.account["actions"])
+    actions += [w.replace(f"{contents.path}: ", "") for w in contents.warnings]
+    if others:
+        actions.append("messages of other topics lost: " + ", ".join(others))
+    span = contents.span_ns / _NS if contents.span_ns is not None else js.account["span"]
+    used = covered_seconds(t)
+    present = max(span, used) if contents.lost_exact else float("nan")
+    return ReadAccount(source=str(contents.path), kind="bag",
+                       samples_present=js.account["present"] + sum(topic_lost.values()),
+                       samples_used=int(t.size), seconds_present=present,
+                       seconds_used=used, dropped=dropped,
+                       degraded={"ball_off_frame": ball_off}, actions=actions,
+                       exact=contents.lost_exact)
 
 
 def read_bag(path: str | Path, topic_map: dict[str, str] | None = None, *,
              strict: bool = False, msg_dirs: list[str | Path] | None = None,
-             time_origin: str = "auto") -> Recording:
+             time_origin: str = "auto", gates: Gates | None = None) -> Recording:
     """Read a bag into a :class:`Recording` (our conventions: the bag's messages are).
 
-    The time base is the ``joint_states`` header stamps (sorted, duplicates dropped).
-    ``torque`` is the latest ``command`` at or before each sample (``effort`` of the joint
-    state before the first command, or when there is no command topic). Ball fields hold
-    the latest ``ball`` observation by its receive (log) time; ``phi_dot`` comes from the
-    ``controller`` topic and ground truth from ``truth`` when present. Log times are mapped
-    to the header clock by the median offset between the two on ``joint_states``.
+    The time base is the ``joint_states`` header stamps (sorted; the physical gates of
+    :func:`bfr_model.io.account.gate_samples` drop repeated stamps and values no hardware
+    makes). ``torque`` is the latest ``command`` at or before each sample (``effort`` of
+    the joint state before the first command, or when there is no command topic). Ball
+    fields hold the latest ``ball`` observation placed at its header stamp (the image's
+    time; its receive time only for an observation without a stamp, and ``meta["notes"]``
+    says so), and ``extra["ball_stamp"]`` is the held observation's stamp [s] on the axis of
+    ``t``; ``phi_dot`` comes from the ``controller`` topic and ground truth from ``truth``
+    when present. Log times are mapped to the header clock by the median offset between
+    the two on ``joint_states``.
+
+    The MCAP file is read chunk by chunk: a chunk failing its CRC is skipped, a file cut
+    short (a recorder killed: no footer, no metadata.yaml) is read to its last intact
+    chunk; what could not be read is counted per topic and cause in
+    ``meta["read_account"]`` (:class:`~bfr_model.io.account.ReadAccount`).
 
     Parameters
     ----------
@@ -1066,32 +1380,48 @@ def read_bag(path: str | Path, topic_map: dict[str, str] | None = None, *,
         ``"absolute"`` keeps stamps as seconds; ``"first"`` subtracts the first
         ``joint_states`` stamp; ``"auto"`` does the latter only for wall-clock stamps
         (> 1e8 s), recording the origin in ``meta["time_origin_ns"]``.
+    gates : Gates, optional
+        Bounds of the physical gates (default: from rig.yaml).
 
     Raises
     ------
     BagError
-        Not a bag, no ``joint_states`` messages, undecodable messages, or (``strict``) a
-        truncated file. The message names the file.
+        Not a bag, a topic of another type than the contract's, no usable ``joint_states``
+        messages, or (``strict``) a damaged file. The message names the file.
     """
+    if time_origin not in ("auto", "absolute", "first"):
+        raise BagError(f"time_origin must be 'auto', 'absolute' or 'first', got {time_origin!r}")
     p = Path(path)
+    names = {k: v.lstrip("/") for k, v in _resolve_topics(topic_map).items()}
+    gates = gates if gates is not None else Gates.from_params()
     contents = read_bag_messages(p)
     _warn_or_raise(contents.warnings, strict)
-    names = {k: v.lstrip("/") for k, v in _resolve_topics(topic_map).items()}
-    decode = _Decoder(store=_bag_typestore(contents, msg_dirs), path=contents.path)
     by_role = _messages_by_role(contents, names)
+    decode = _Decoder(store=_bag_typestore(contents, msg_dirs), path=contents.path)
     notes: list[str] = []
-    js = _read_joint_states(by_role["joint_states"], decode, notes)
+    js = _read_joint_states(by_role["joint_states"], decode, notes, gates)
     torque = _torque(js, by_role["command"], decode, notes)
     ball = _ball_fields(js, by_role["ball"], decode, notes)
+    with np.errstate(over="ignore", invalid="ignore"):
+        off = ball.valid & (np.hypot(ball.x, ball.y) > gates.max_ball_radius)
+    if off.any():
+        ball = dataclasses.replace(ball, valid=ball.valid & ~off,
+                                   x=np.where(off, np.nan, ball.x),
+                                   y=np.where(off, np.nan, ball.y),
+                                   phi=np.where(off, np.nan, ball.phi))
     optional = _optional_fields(js, by_role, decode)
     t, origin = _time_axis(js.stamp, time_origin)
     meta = _bag_meta(contents, p, names, by_role, origin, notes)
+    extra = _extra_arrays(contents, js, meta["notes"])
+    if by_role["ball"]:
+        extra["ball_stamp"] = (ball.stamp_ns - origin) / _NS
     try:
         rec = Recording(t=t, theta=js.theta, theta_dot=js.theta_dot, torque=torque,
                         ball_x=ball.x, ball_y=ball.y, ball_valid=ball.valid, phi=ball.phi,
-                        extra=_extra_arrays(contents, js.stamp.size), meta=meta, **optional)
+                        extra=extra, meta=meta, **optional)
     except RecordingError as exc:
         raise BagError(f"{contents.path}: {exc}") from exc
     rec.meta["sample_rate"] = rec.sample_rate()
     rec.meta["camera_fix_rate"] = rec.camera_fix_rate()
+    rec.meta["read_account"] = _account(contents, names, js, int(off.sum()), t).to_json()
     return rec

@@ -17,6 +17,10 @@ contact-angle file puts them into ``phi_true`` / ``phi_dot_true`` and computes t
 recording's ``phi`` (ball-centre angle) from ``theta, ball_x, ball_y``, unless a
 ``phi_ball`` column holds it. A ``ball_valid`` column (0/1) is optional; without it a sample
 is valid where ``ball_x`` and ``ball_y`` are finite.
+
+Every data row is accounted for (``meta["read_account"]``, :mod:`bfr_model.io.account`):
+rows cut short, with another number of fields or a cell that is not a number, and rows the
+physical gates stop are left out and counted by cause with their line.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
 from bfr_model.recording import OPTIONAL_FIELDS, Recording, RecordingError, ball_centre_angle
 
 __all__ = ["CSV_COLUMNS", "CsvFormatError", "read_csv", "write_csv"]
@@ -140,6 +145,10 @@ class _CsvTable:
         Cells of each data row, as many as header columns.
     row_lines : list of int
         1-based line number of each row.
+    lost : dict of str to list of int
+        Line numbers of data rows that could not be used, per account cause (``truncated``:
+        the last line cut short; ``corrupt``: another number of fields or a cell that is not
+        a number).
     """
 
     meta: dict[str, Any]
@@ -147,6 +156,7 @@ class _CsvTable:
     header_line: int
     rows: list[list[str]]
     row_lines: list[int]
+    lost: dict[str, list[int]]
 
 
 def _read_text(p: Path) -> str:
@@ -160,25 +170,30 @@ def _read_text(p: Path) -> str:
 def _split_table(p: Path, text: str) -> _CsvTable:
     """Split the text into metadata, header and rows; blank and comment lines are skipped.
 
+    A row with another number of fields than the header is not used: ``truncated`` when it
+    is the last line and shorter, else ``corrupt`` (counted in :attr:`_CsvTable.lost`).
+
     Raises
     ------
     CsvFormatError
-        A row with another number of fields than the header, or no header.
+        No header.
     """
     meta: dict[str, Any] = {}
     header: list[str] | None = None
     header_line = 0
     rows: list[list[str]] = []
     row_lines: list[int] = []
+    lost: dict[str, list[int]] = {}
     lines = text.split("\n")
-    ends_with_newline = text.endswith("\n")
     if lines and lines[-1] == "":
         lines.pop()
+    last = max((i for i, ln in enumerate(lines) if ln.strip()), default=-1)
     for i, raw in enumerate(lines):
         line = raw.strip()
         if not line:
             continue
-        if line.startswith("#"):
+        if line.startswith("#") and not (header is not None
+                                         and line.count(",") == len(header) - 1):
             if header is None and ":" in line:
                 key, _, value = line[1:].partition(":")
                 meta[key.strip()] = _meta_value(value.strip())
@@ -189,18 +204,15 @@ def _split_table(p: Path, text: str) -> _CsvTable:
             continue
         cells = line.split(",")
         if len(cells) != len(header):
-            last = i == len(lines) - 1
-            hint = (" (truncated last line" + ("" if ends_with_newline else
-                                              ", no newline at end of file") + ")"
-                    if last and len(cells) < len(header) else "")
-            raise CsvFormatError(f"{p}:{i + 1}: row has {len(cells)} field(s), the header "
-                                 f"(line {header_line}) has {len(header)}{hint}")
+            cause = "truncated" if i == last and len(cells) < len(header) else "corrupt"
+            lost.setdefault(cause, []).append(i + 1)
+            continue
         rows.append(cells)
         row_lines.append(i + 1)
     if header is None:
         raise CsvFormatError(f"{p}: no header row (file is empty or only comments)")
     return _CsvTable(meta=meta, header=header, header_line=header_line, rows=rows,
-                     row_lines=row_lines)
+                     row_lines=row_lines, lost=lost)
 
 
 def _check_columns(p: Path, table: _CsvTable) -> None:
@@ -226,22 +238,31 @@ def _check_columns(p: Path, table: _CsvTable) -> None:
 def _columns(p: Path, table: _CsvTable) -> dict[str, np.ndarray]:
     """The rows as float columns by name.
 
+    A row with a cell that is not a number is left out and counted ``corrupt`` in
+    ``table.lost`` (with its line).
+
     Raises
     ------
     CsvFormatError
-        The first non-numeric cell, naming its line and column.
+        No row holds numbers only.
     """
     try:
         data = np.array(table.rows, dtype=np.float64)
     except ValueError:
-        for cells, ln in zip(table.rows, table.row_lines, strict=True):
-            for name, cell in zip(table.header, cells, strict=True):
-                try:
-                    float(cell)
-                except ValueError:
-                    raise CsvFormatError(f"{p}:{ln}: column {name!r}: non-numeric cell "
-                                         f"{cell.strip()!r}") from None
-        raise  # pragma: no cover - the loop above raises
+        good = []
+        for k, cells in enumerate(table.rows):
+            try:
+                good.append([float(c) for c in cells])
+            except ValueError:
+                table.lost.setdefault("corrupt", []).append(table.row_lines[k])
+                table.row_lines[k] = -1
+        kept = [ln for ln in table.row_lines if ln >= 0]
+        table.row_lines[:] = kept
+        table.lost["corrupt"].sort()
+        if not good:
+            raise CsvFormatError(f"{p}: no data row holds numbers only (first bad line "
+                                 f"{table.lost['corrupt'][0]})") from None
+        data = np.array(good, dtype=np.float64)
     return {name: data[:, j] for j, name in enumerate(table.header)}
 
 
@@ -299,7 +320,9 @@ def _recording_fields(col: dict[str, np.ndarray], header: list[str],
         if name in OPTIONAL_FIELDS:
             kwargs[name] = col[name]
         else:
-            extra[name[len("extra_"):] if name.startswith("extra_") else name] = col[name]
+            short = name[len("extra_"):] if name.startswith("extra_") else name
+            # write_csv prefixes an extra whose name is a column's; undo only that
+            extra[short if short not in col and short not in extra else name] = col[name]
     return kwargs, extra
 
 
@@ -308,7 +331,9 @@ def _csv_meta(meta: dict[str, Any], p: Path, kind: str,
     """``Recording.meta``: the file's metadata with provenance and the conversion made."""
     meta_out = dict(meta)
     meta_out.pop("phi_kind", None)
-    conversions = list(meta_out.get("conversions", []))
+    conv = meta_out.get("conversions", [])
+    conversions = [conv] if isinstance(conv, str) else list(conv) if isinstance(
+        conv, list) else [str(conv)]
     meta_out["conversions"] = conversions
     meta_out["source"] = str(p)
     meta_out.setdefault("source_kind", "csv")
@@ -319,8 +344,49 @@ def _csv_meta(meta: dict[str, Any], p: Path, kind: str,
     return meta_out
 
 
-def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
+def _gated(p: Path, table: _CsvTable, col: dict[str, np.ndarray],
+           gates: Gates | None) -> tuple[dict[str, np.ndarray], ReadAccount]:
+    """The columns of the samples the physical gates keep, and the read's account."""
+    g = gate_samples(col["t"], col["theta"], col["theta_dot"], col["torque"], col["ball_x"],
+                     col["ball_y"], rates=(col["phi_dot"],), gates=gates)
+    lines = table.row_lines
+    dropped = dict(g.dropped)
+    for cause, where in table.lost.items():
+        dropped[cause] = dropped.get(cause, 0) + len(where)
+    actions = g.actions(lambda i: f"line {lines[i]}")
+    actions += [f"{cause}: {len(where)} row(s) skipped, first at line {where[0]}"
+                for cause, where in table.lost.items()]
+    t_all = col["t"][np.isfinite(col["t"])]
+    kept = col["t"][g.keep]
+    account = ReadAccount(
+        source=str(p), kind="csv",
+        samples_present=len(lines) + sum(len(w) for w in table.lost.values()),
+        samples_used=int(g.keep.sum()),
+        seconds_present=covered_seconds(t_all),
+        seconds_used=covered_seconds(kept),
+        dropped=dropped, degraded={"ball_off_frame": int(g.ball_off.sum())}, actions=actions)
+    if not g.keep.any():
+        raise CsvFormatError(f"{p}: no row passed the checks: {account.line()}")
+    out = {k: v[g.keep] for k, v in col.items()}
+    if g.ball_off.any():
+        off = g.ball_off[g.keep]
+        if "ball_valid" in out:
+            out["ball_valid"] = np.where(off, 0.0, out["ball_valid"])
+        out["ball_x"] = np.where(off, np.nan, out["ball_x"])
+        out["ball_y"] = np.where(off, np.nan, out["ball_y"])
+    table.row_lines[:] = [ln for ln, k in zip(lines, g.keep, strict=True) if k]
+    return out, account
+
+
+def read_csv(path: str | Path, *, phi_kind: str | None = None,
+             gates: Gates | None = None) -> Recording:
     """Read a CSV recording (see the module doc for the format).
+
+    Every data row is accounted for (``meta["read_account"]``, a
+    :class:`~bfr_model.io.account.ReadAccount`): rows cut short, with another number of
+    fields, a cell that is not a number, or stopped by the physical gates
+    (:func:`bfr_model.io.account.gate_samples`: non-finite, repeated or out-of-order
+    stamps, values no hardware makes) are left out and counted by cause.
 
     Parameters
     ----------
@@ -329,21 +395,22 @@ def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
     phi_kind : {"contact", "ball_centre"}, optional
         Override the meaning of the ``phi`` column (default: the ``phi_kind`` metadata,
         else ``"contact"`` as ``bfr simulate`` writes).
+    gates : Gates, optional
+        Bounds of the physical gates (default: from rig.yaml).
 
     Raises
     ------
     CsvFormatError
-        Missing file, no header, missing required columns, a row with the wrong number of
-        fields (e.g. a truncated last line), a non-numeric cell, or invalid recording data
-        (the message names the line and column).
+        Missing file, no header, missing required columns, no usable row, or invalid
+        recording data (the message names the line and column).
     """
     p = Path(path)
     table = _split_table(p, _read_text(p))
     _check_columns(p, table)
-    col = _columns(p, table)
     kind = phi_kind or table.meta.get("phi_kind", "contact")
     if kind not in ("contact", "ball_centre"):
         raise CsvFormatError(f"{p}: phi_kind must be 'contact' or 'ball_centre', got {kind!r}")
+    col, account = _gated(p, table, _columns(p, table), gates)
     kwargs, extra = _recording_fields(col, table.header, kind)
     meta = _csv_meta(table.meta, p, kind, col)
     try:
@@ -356,4 +423,5 @@ def read_csv(path: str | Path, *, phi_kind: str | None = None) -> Recording:
             table.row_lines) else str(p)
         raise CsvFormatError(f"{where}: {msg}") from exc
     rec.meta.setdefault("sample_rate", rec.sample_rate())
+    rec.meta["read_account"] = account.to_json()
     return rec

@@ -86,7 +86,7 @@ def fix_statistics(run: RigRun) -> dict[str, Any]:
     out["fixes"] = int(fi.size)
     if fi.size < 3:
         return out
-    end = _camera_backlog_end(fi)
+    end = _camera_backlog_end(fi, run.column("t"))
     steady = fi[fi >= end]
     out["backlog_fixes"] = int(np.count_nonzero(fi < end))
     out["backlog_end_t"] = float(t[end]) if end else None
@@ -122,7 +122,7 @@ def phi_theta_lag(run: RigRun, lags: range = range(0, 13), t_min: float | None =
     x, y, dth = run.column("x"), run.column("y"), run.column("dtheta")
     fi = np.nonzero(_new_fix(run))[0]
     if t_min is None:
-        t_min = float(t[_camera_backlog_end(fi)]) + 0.1
+        t_min = float(t[_camera_backlog_end(fi, run.column("t"))]) + 0.1
     m = fi[(t[fi] > t_min) & (np.abs(dth[fi]) > min_speed) & (fi >= max(lags))]
     res = 10.0 ** (math.floor(math.log10(np.max(np.abs(th)))) - 5)
     psi = np.arctan2(x[m], y[m])
@@ -147,7 +147,7 @@ def rolling_direction(run: RigRun) -> dict[str, float]:
     t, th, ph = run.column("t"), run.column("theta"), run.column("phi")
     fi = np.nonzero(_new_fix(run))[0]
 
-    start = _camera_backlog_end(fi)
+    start = _camera_backlog_end(fi, run.column("t"))
     s = slice(start + 100, None)
     init = np.abs(ph[s] - th[s]) < 2.0  # the rig's phi estimator initialised
     tt, a, b = t[s][init], th[s][init], ph[s][init]
@@ -214,7 +214,7 @@ def ball_radius_fit(run: RigRun, lag: int = 8, params: Any = None) -> BallRadius
     th = run.column("theta")
     x, y = run.column("x"), run.column("y")
     fi = np.nonzero(_new_fix(run))[0]
-    fi = fi[(fi >= _camera_backlog_end(fi)) & (fi >= lag)]
+    fi = fi[(fi >= _camera_backlog_end(fi, run.column("t"))) & (fi >= lag)]
     X, Y, T = x[fi], y[fi], th[fi - lag]
     pc, pr = _radius_table(params)
 
@@ -400,7 +400,7 @@ def camera_delay_smoothness(run: RigRun, taus: FloatArray | None = None,
     x, y = run.column("x"), run.column("y")
     keep = np.r_[True, np.diff(t) > 0]
     fi = np.nonzero(_new_fix(run) & keep)[0]
-    fi = fi[fi >= _camera_backlog_end(fi)]
+    fi = fi[fi >= _camera_backlog_end(fi, run.column("t"))]
     tf, psi = t[fi], np.arctan2(x[fi], y[fi])
     hp = []
     for tau in taus:
@@ -472,7 +472,7 @@ def report(data_dir: Path, params: Any = None) -> str:
         t = run.column("t")
         fi = np.nonzero(_new_fix(run))[0]
 
-        start = _camera_backlog_end(fi)
+        start = _camera_backlog_end(fi, run.column("t"))
         ph = run.column("phi")
         sel = fi[(fi > start + 20)]
         dd = derivative_delay(t[sel], ph[sel] - 0.0, run.column("dphi")[sel],

@@ -10,23 +10,42 @@ per reason in :attr:`RigLog.skipped`. ``[inf] initializing hardware..`` starts a
 (one file may hold several runs whose clocks restart, e.g. ``step_response_tau_001``);
 ``[inf] ball was lost`` marks the held camera fix as stale.
 
-The conventions of these logs were inferred from the data (docs/ntnu-rig-conventions.md,
-``python -m bfr_model.io.rig_conventions``) and are applied by :func:`run_to_recording`:
+Every data line is accounted for (:mod:`bfr_model.io.account`): the file is read line by
+line (its numbers go straight into float arrays; the text is never held), each run's lines
+pass the physical gates, and the run's :class:`~bfr_model.io.account.ReadAccount`
+(``RigRun.account``, ``meta["read_account"]``) counts those not used by cause: ``corrupt``
+(a line with keys missing or a value that is not a number, a line cut by another, a line
+so damaged that only most of its keys are left), ``truncated`` (the last line cut off),
+``duplicate``, ``out_of_order``, ``out_of_range``, ``non_finite``.
+
+The conventions of the format were inferred from the NTNU rig's logs
+(docs/ntnu-rig-conventions.md, ``python -m bfr_model.io.rig_conventions``) and are applied by
+:func:`run_to_recording`. What is a fact of one rig (its timing) is never assumed: it is
+measured on every run (:mod:`bfr_model.io.timing`) and reported in
+``meta["sensor_timing"]``.
 
 - ``theta`` has our sign (counter-clockwise positive, theta and phi advance together) and
   its zero agrees with ours modulo pi; it is printed with 6 significant digits, so its
   resolution is 1 mrad for |theta| in [100, 1000) rad and 10 mrad above.
 - ``torque`` has our sign: a positive command accelerates ``theta`` positive.
 - ``x, y`` are the camera's ball centre in the world frame [m] (0, 0 = no ball), held
-  between camera frames (165 Hz against a ~920 Hz loop). At start-up the camera's queued
-  frames are replayed at the loop rate for ~0.9 s (a backlog since program start): those
-  fixes are stale and are marked invalid.
-- The rig's ``phi`` equals ``theta[k - 8] + atan2(x, y)`` at each new fix k: the software
-  pairs each image with the frame angle logged 8 samples (~8.7 ms) earlier. ``phi`` of the
-  recording is recomputed this way (full precision of x, y; defined before the rig's phi
-  estimator initialises, when the rig logs ``phi = atan2(x, y)`` alone).
-- ``dtheta`` is the servo's velocity estimate, the derivative of ``theta`` delayed by
-  ~6.4 ms; ``dphi`` is a filtered derivative of ``phi`` updated at each fix.
+  between camera frames. Any ratio of log lines to camera fixes is read (the NTNU rig: a
+  fix every 5-7 lines of a ~920 Hz loop; another rig may log one line per fix). A camera
+  that queued frames since program start replays them faster than it can take them at
+  start-up (the NTNU rig: ~0.9 s at the loop rate): such a burst is detected on the fixes'
+  own intervals (:func:`bfr_model.io.timing.camera_backlog_end`) and marked invalid.
+- The rig's ``phi`` is ``theta[k - L] + atan2(x, y)`` at each new fix k: its software pairs
+  each image with the frame angle logged L samples earlier (the NTNU rig: L = 8). L is
+  measured on each run (:func:`phi_pairing_lag`; 0 when the log's phi does not follow the
+  rule at any lag) and ``phi`` of the recording is recomputed with it (full precision of
+  x, y; defined before the rig's phi estimator initialises).
+- ``dtheta`` is the servo's velocity estimate; its lag behind the rate of ``theta`` is
+  measured per run (:func:`bfr_model.io.timing.velocity_lag`; the NTNU rig: 6.4 ms) and
+  reported, not applied here (the recording keeps the logged values). ``dphi`` is a
+  filtered derivative of ``phi`` updated at each fix.
+
+:func:`format_rig_log` and :func:`write_rig_log` write recordings in the same format (one
+``initializing hardware`` block per run, numbers with 6 significant digits).
 
 Pure Python + numpy; no ``rclpy``.
 """
@@ -39,26 +58,34 @@ import math
 import re
 import time
 import warnings
+from array import array
 from collections import Counter
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import numpy as np
 from numpy.typing import NDArray
 
+from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
+from bfr_model.io.timing import camera_backlog_end, line_rate, velocity_lag
 from bfr_model.recording import Recording
 
 __all__ = [
     "KEYS",
+    "MAX_PHI_THETA_LAG",
     "RigLog",
     "RigLogError",
     "RigLogWarning",
     "RigRun",
+    "format_rig_log",
     "parse_rig_log",
     "parse_rig_log_text",
+    "phi_pairing_lag",
     "read_rig_log",
     "run_to_recording",
+    "write_rig_log",
 ]
 
 #: Keys of a data line, in order, with their units.
@@ -66,10 +93,8 @@ KEYS = ("t", "torque", "theta", "phi", "dtheta", "dphi", "x", "y")
 UNITS = {"t": "s", "torque": "N m", "theta": "rad", "phi": "rad", "dtheta": "rad/s",
          "dphi": "rad/s", "x": "m", "y": "m"}
 
-#: Samples between the frame angle the rig pairs with an image and the image's arrival.
-RIG_PHI_THETA_LAG_SAMPLES = 8
-#: Delay of the logged ``dtheta`` behind the derivative of ``theta`` [s] (measured).
-RIG_DTHETA_DELAY_S = 0.0064
+#: Largest pairing lag of the log's ``phi`` searched [samples] (:func:`phi_pairing_lag`).
+MAX_PHI_THETA_LAG = 24
 
 _DATA_RE = re.compile(
     r"\[inf\] t=([^,]*),torque=([^,]*),theta=([^,]*),phi=([^,]*),"
@@ -93,7 +118,8 @@ class RigRun:
     Attributes
     ----------
     data : ndarray, shape (n, 8)
-        Values in the order of :data:`KEYS`, as logged (rig conventions and units).
+        Values in the order of :data:`KEYS`, as logged (rig conventions and units), of the
+        samples the physical gates kept (:func:`bfr_model.io.account.gate_samples`).
     lines : ndarray of int, shape (n,)
         1-based line number of each sample in the file.
     events : list of (int, str)
@@ -101,12 +127,18 @@ class RigRun:
         lost``); the index is that of the first sample after the message.
     dropped_duplicates : int
         Samples dropped because their timestamp repeated the previous one.
+    ball_off : ndarray of bool, shape (n,), optional
+        Samples whose held ball position is off the frame (excluded from the ball fields).
+    account : ReadAccount, optional
+        What the run's lines held and what was used (:mod:`bfr_model.io.account`).
     """
 
     data: NDArray[np.float64]
     lines: NDArray[np.int64]
     events: list[tuple[int, str]] = field(default_factory=list)
     dropped_duplicates: int = 0
+    ball_off: NDArray[np.bool_] | None = None
+    account: ReadAccount | None = None
 
     def column(self, key: str) -> NDArray[np.float64]:
         """One raw column by key (see :data:`KEYS`)."""
@@ -128,12 +160,13 @@ class RigLog:
     n_lines : int
         Lines in the file.
     n_data : int
-        Data lines parsed (including duplicates later dropped).
+        Complete data lines (including samples the gates later dropped).
     skipped : dict of str to int
         Skipped lines per reason: ``empty``, ``terminal`` (prompts, escape codes, build
         output), ``info`` (other ``[inf]`` messages), ``obs`` (``[obs]`` lines),
         ``partial`` (a data line cut short by another line), ``truncated_final`` (the last
-        line cut off), ``duplicate_time`` (samples dropped for a repeated timestamp).
+        line cut off), ``malformed`` (keys missing, unknown or out of order, or a value that
+        is not a number), ``duplicate_time`` (samples dropped for a repeated timestamp).
     warnings : list of str
         Recoverable problems with their line numbers.
     runs : list of RigRun
@@ -160,6 +193,8 @@ class RigLog:
     def recording(self, run: int | None = None, **options: Any) -> Recording:
         """The selected run as a :class:`Recording` in our conventions.
 
+        ``meta["read_account"]`` is the run's :class:`~bfr_model.io.account.ReadAccount`.
+
         Parameters
         ----------
         run : int, optional
@@ -182,13 +217,6 @@ class RigLog:
             rec.meta["notes"].append(
                 f"the log holds {len(self.runs)} runs (clock restarts); run {k} selected")
         return rec
-
-
-def _float_or_error(text: str, key: str, where: str) -> float:
-    try:
-        return float(text)
-    except ValueError:
-        raise RigLogError(f"{where}: value of {key!r} is not a number: {text!r}") from None
 
 
 def _classify_malformed(line: str) -> tuple[str, str]:
@@ -227,21 +255,33 @@ def _clean_terminal_line(line: str) -> str:
 
 @dataclass(kw_only=True)
 class _RunRows:
-    """The data rows of one run as scanned (mutable; still text, not yet checked).
+    """The data rows of one run as scanned (mutable), values already as floats.
+
+    The values are appended to flat ``array('d')`` buffers (8 per row, 8 bytes each), so a
+    run costs its numbers and nothing per line (the log is read line by line).
 
     Attributes
     ----------
-    rows : list of tuple of str
-        The values of each data line, in the order of :data:`KEYS`.
-    lines : list of int
+    values : array of float
+        The values of each data line, in the order of :data:`KEYS`, row after row.
+    lines : array of int
         1-based line number of each row.
     events : list of (int, str)
         ``(row index, message)`` of ``[inf]`` messages, as in :attr:`RigRun.events`.
+    lost : dict of str to list of int
+        Line numbers of the lines of this run lost before the gates, per account cause
+        (``corrupt``: malformed or not a number or cut by another line; ``truncated``: the
+        last line cut off).
     """
 
-    rows: list[tuple[str, ...]] = field(default_factory=list)
-    lines: list[int] = field(default_factory=list)
+    values: array = field(default_factory=lambda: array("d"))
+    lines: array = field(default_factory=lambda: array("q"))
     events: list[tuple[int, str]] = field(default_factory=list)
+    lost: dict[str, list[int]] = field(default_factory=dict)
+
+    def __len__(self) -> int:
+        """Number of rows."""
+        return len(self.lines)
 
 
 @dataclass(kw_only=True)
@@ -252,59 +292,144 @@ class _LogScan:
     ----------
     source : str
         Name used in messages.
-    last_nonempty : int
-        0-based index of the last non-blank line (-1: none); a partial data line there is
-        a truncated final line.
-    ends_with_newline : bool
-        Whether the text ends with a newline (said in the truncated-line warning).
-    runs : list of _RunRows
-        Runs in file order; the last one is being filled.
+    duplicates : str
+        Policy for repeated time stamps (see :func:`parse_rig_log_text`).
+    gates : Gates or None
+        Bounds of the physical gates (None: rig.yaml's).
+    current : _RunRows
+        The run being filled.
+    runs : list of RigRun
+        Finished runs in file order (each finished as soon as the next one starts).
     skipped : Counter
         Skipped lines per reason (see :attr:`RigLog.skipped`).
     warnings : list of str
         Recoverable problems with their line numbers.
     new_run_pending : bool
         A restart marker was seen: the next data line starts a new run.
+    pending_events : list of str
+        Messages after a restart marker, before the next run's first line (they belong to
+        that run, at its first sample).
+    pending_partial : tuple or None
+        ``(line number, detail, run rows)`` of a cut-off data line at the end of its line:
+        a ``truncated_final`` line if no non-blank line follows, else ``partial``.
+    n_lines, n_data : int
+        Lines and complete data lines so far.
+    last_nonblank : int
+        Line number of the latest non-blank line.
+    dropped_runs : list of RigRun
+        Runs of which the gates kept no sample (accounted, not returned).
     """
 
     source: str
-    last_nonempty: int
-    ends_with_newline: bool
-    runs: list[_RunRows] = field(default_factory=lambda: [_RunRows()])
+    duplicates: str = "drop"
+    gates: Gates | None = None
+    current: _RunRows = field(default_factory=_RunRows)
+    runs: list[RigRun] = field(default_factory=list)
     skipped: Counter[str] = field(default_factory=Counter)
     warnings: list[str] = field(default_factory=list)
     new_run_pending: bool = False
+    pending_events: list[str] = field(default_factory=list)
+    pending_partial: tuple[int, str, _RunRows] | None = None
+    n_lines: int = 0
+    n_data: int = 0
+    last_nonblank: int = 0
+    dropped_runs: list[RigRun] = field(default_factory=list)
 
     def add_data(self, groups: tuple[str, ...], lineno: int) -> None:
-        """Append a data row, first starting a new run after a restart marker."""
-        if self.new_run_pending and self.runs[-1].rows:
-            self.runs.append(_RunRows())
+        """Append a data row, first starting a new run after a restart marker.
+
+        A value that is not a number makes the line ``corrupt`` (counted, warned).
+        """
+        if self.new_run_pending and len(self.current):
+            self.finish_current()
         self.new_run_pending = False
-        self.runs[-1].rows.append(groups)
-        self.runs[-1].lines.append(lineno)
+        if self.pending_events:
+            self.current.events += [(len(self.current), m) for m in self.pending_events]
+            self.pending_events = []
+        try:
+            row = [float(g) for g in groups]
+        except ValueError:
+            bad = next(k for k, g in zip(KEYS, groups, strict=True) if not _is_float(g))
+            msg = (f"{self.source}:{lineno}: value of {bad!r} is not a number: "
+                   f"{groups[KEYS.index(bad)]!r}")
+            self.lose("corrupt", "malformed", lineno, msg)
+            return
+        self.n_data += 1
+        self.current.values.extend(row)
+        self.current.lines.append(lineno)
+
+    def lose(self, cause: str, reason: str, lineno: int, warning: str,
+             rows: _RunRows | None = None) -> None:
+        """Count a data line lost before the gates (``cause`` of the account)."""
+        self.skipped[reason] += 1
+        self.warnings.append(warning)
+        (rows or self.current).lost.setdefault(cause, []).append(lineno)
 
     def add_info(self, msg: str) -> None:
         """Count an ``[inf]`` message: a restart marker, or an event of the current run."""
         self.skipped["info"] += 1
-        if msg.startswith("initializing hardware"):
+        if msg.startswith(("initializing hardware", "stopped")):
             self.new_run_pending = True
-        elif msg.startswith("stopped"):
-            self.new_run_pending = True
+        elif self.new_run_pending:
+            self.pending_events.append(msg)
         else:
-            self.runs[-1].events.append((len(self.runs[-1].rows), msg))
+            self.current.events.append((len(self.current), msg))
+
+    def resolve_partial(self, final: bool) -> None:
+        """Settle a pending cut-off line: ``truncated_final`` at the end, else ``partial``."""
+        if self.pending_partial is None:
+            return
+        lineno, detail, rows = self.pending_partial
+        self.pending_partial = None
+        if final:
+            self.lose("truncated", "truncated_final", lineno,
+                      f"{self.source}:{lineno}: truncated final line skipped ({detail})", rows)
+        else:
+            self.lose("corrupt", "partial", lineno,
+                      f"{self.source}:{lineno}: partial data line skipped ({detail})", rows)
+
+    def finish_current(self) -> None:
+        """Convert, gate and account the run being filled; start a new one."""
+        rows = self.current
+        self.current = _RunRows()
+        if len(rows) or rows.lost:
+            run = _finish_run(rows, self.source, self.duplicates, self.gates)
+            if len(run):
+                self.runs.append(run)
+            else:
+                self.warnings.append(f"{self.source}: a run of {run.account.samples_present} "
+                                     f"line(s) kept no sample: {run.account.line()}")
+                self.dropped_runs.append(run)
+            self.skipped["duplicate_time"] += run.dropped_duplicates
 
 
-def _scan_data_segments(scan: _LogScan, text: str, lineno: int, *,
-                        last_line: bool) -> None:
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+#: Keys after the first of a data line, as they appear in it.
+_LATER_KEYS = tuple(f",{k}=" for k in KEYS[1:])
+
+
+def _looks_like_data(line: str) -> bool:
+    """A line holding at least half of a data line's keys: a damaged data line, not noise.
+
+    One damaged byte (a flipped bit, a stray carriage return or escape) breaks at most one
+    key; such a line is lost data and counted ``corrupt``, never skipped as noise.
+    """
+    return sum(k in line for k in _LATER_KEYS) >= len(_LATER_KEYS) // 2 + 1
+
+
+def _scan_data_segments(scan: _LogScan, text: str, lineno: int) -> None:
     """Parse ``text``, one or more data lines run together (``[inf] t=...[inf] t=...``).
 
-    Complete segments are added as data. A cut-off segment is skipped with a warning
-    (``truncated_final`` when it ends the last non-blank line, else ``partial``).
-
-    Raises
-    ------
-    RigLogError
-        A segment with missing, unknown or out-of-order keys.
+    Complete segments are added as data. A cut-off segment ending the line may be the
+    file's truncated last line (settled by the next non-blank line); other cut-off or
+    malformed segments are ``corrupt`` lines, counted and warned.
     """
     segments = [s for s in text.split("[inf] ")[1:] if s]
     for j, seg in enumerate(segments):
@@ -313,121 +438,131 @@ def _scan_data_segments(scan: _LogScan, text: str, lineno: int, *,
         if m is not None:
             scan.add_data(m.groups(), lineno)
             continue
-        is_last = last_line and j == len(segments) - 1
         kind, detail = _classify_malformed(seg_line)
-        if kind == "partial" and is_last:
-            scan.skipped["truncated_final"] += 1
-            eof = "" if scan.ends_with_newline else ", no newline at end of file"
-            scan.warnings.append(f"{scan.source}:{lineno}: truncated final line skipped "
-                                 f"({detail}{eof})")
+        if kind == "partial" and j == len(segments) - 1:
+            scan.pending_partial = (lineno, detail, scan.current)
         elif kind == "partial":
-            scan.skipped["partial"] += 1
-            scan.warnings.append(f"{scan.source}:{lineno}: partial data line skipped "
-                                 f"({detail})")
+            scan.lose("corrupt", "partial", lineno,
+                      f"{scan.source}:{lineno}: partial data line skipped ({detail})")
         else:
-            raise RigLogError(f"{scan.source}:{lineno}: malformed data line: {detail}: "
-                              f"{seg_line[:120]!r}")
+            scan.lose("corrupt", "malformed", lineno,
+                      f"{scan.source}:{lineno}: malformed data line skipped: {detail}: "
+                      f"{seg_line[:120]!r}")
 
 
-def _scan_line(scan: _LogScan, raw: str, i: int) -> None:
-    """Sort line ``i`` (0-based) into a data row, a run marker or event, or counted noise."""
-    lineno = i + 1
+def _scan_line(scan: _LogScan, raw: str, lineno: int) -> None:
+    """Sort line ``lineno`` (1-based) into a data row, a run marker or event, or noise."""
     line = raw[:-1] if raw.endswith("\r") else raw
     m = _DATA_RE.fullmatch(line)
     if m is not None:
+        scan.resolve_partial(final=False)
+        scan.last_nonblank = lineno
         scan.add_data(m.groups(), lineno)
         return
     # Slow path: noise, or a data line wrapped in escape codes / carriage returns.
     clean = _clean_terminal_line(line)
+    if clean:
+        scan.resolve_partial(final=False)
+        scan.last_nonblank = lineno
     m = _DATA_RE.fullmatch(clean)
     if m is not None:
         scan.add_data(m.groups(), lineno)
+    elif "[inf] t=" not in clean and _looks_like_data(line):
+        scan.lose("corrupt", "malformed", lineno,
+                  f"{scan.source}:{lineno}: damaged data line skipped: {line[:120]!r}")
     elif not clean:
         scan.skipped["empty"] += 1
     elif clean.startswith("[obs]"):
         scan.skipped["obs"] += 1
     elif (pos := clean.find("[inf] t=")) >= 0:
-        _scan_data_segments(scan, clean[pos:], lineno, last_line=i == scan.last_nonempty)
+        _scan_data_segments(scan, clean[pos:], lineno)
+    elif clean.startswith("[inf]") and "[inf] t=".startswith(clean):
+        scan.pending_partial = (lineno, "cut inside the line's prefix", scan.current)
     elif clean.startswith("[inf]"):
         scan.add_info(clean[len("[inf]"):].strip())
+    elif "[inf] t=".startswith(clean) and line == clean:
+        scan.pending_partial = (lineno, "cut inside the line's prefix", scan.current)
     else:
         scan.skipped["terminal"] += 1
 
 
-def _rows_to_array(rows: list[tuple[str, ...]], lines: list[int],
-                   source: str) -> NDArray[np.float64]:
-    """The rows as floats, shape (n, 8).
+def _finish_run(raw: _RunRows, source: str, duplicates: str,
+                gates: Gates | None = None) -> RigRun:
+    """Gate and account the rows of one run (:func:`bfr_model.io.account.gate_samples`).
 
     Raises
     ------
     RigLogError
-        A non-numeric value, naming its line and key.
+        With ``duplicates="error"``, a repeated timestamp.
     """
-    try:
-        return np.array(rows, dtype=np.float64)
-    except ValueError:
-        for row, ln in zip(rows, lines, strict=True):
-            for key, val in zip(KEYS, row, strict=True):
-                _float_or_error(val, key, f"{source}:{ln}")
-        raise  # pragma: no cover - the loop above raises
+    lines = np.frombuffer(raw.lines, dtype=np.int64) if len(raw) else np.zeros(0, np.int64)
+    data = (np.frombuffer(raw.values, dtype=np.float64).reshape(-1, len(KEYS)) if len(raw)
+            else np.zeros((0, len(KEYS))))
+    col = {k: data[:, j] for j, k in enumerate(KEYS)}
+    no_ball = (col["x"] == 0.0) & (col["y"] == 0.0)
+    g = gate_samples(col["t"], col["theta"], col["dtheta"], col["torque"],
+                     np.where(no_ball, np.nan, col["x"]), np.where(no_ball, np.nan, col["y"]),
+                     others=(col["phi"], col["dphi"], col["x"], col["y"]),
+                     rates=(col["dphi"],), gates=gates)
+    if g.dropped.get("duplicate") and duplicates == "error":
+        k = g.first["duplicate"]
+        raise RigLogError(f"{source}:{lines[k]}: duplicate timestamp t={float(col['t'][k])!r} "
+                          f"(same as line {lines[k - 1]}); {g.dropped['duplicate']} "
+                          f"duplicate(s) in this run")
+    keep = g.keep
+    events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in raw.events]
+    dropped = dict(g.dropped)
+    for cause, where in raw.lost.items():
+        dropped[cause] = dropped.get(cause, 0) + len(where)
+    actions = g.actions(lambda i: f"line {lines[i]}")
+    actions += [f"{cause}: {len(where)} line(s) skipped, first at line {where[0]}"
+                for cause, where in raw.lost.items()]
+    t_all = col["t"][np.isfinite(col["t"])]
+    kept_t = col["t"][keep]
+    account = ReadAccount(
+        source=source, kind="rig_log", samples_present=len(raw) + sum(
+            len(w) for w in raw.lost.values()), samples_used=int(keep.sum()),
+        seconds_present=covered_seconds(t_all),
+        seconds_used=covered_seconds(kept_t),
+        dropped=dropped, degraded={"ball_off_frame": int(g.ball_off.sum())}, actions=actions)
+    return RigRun(data=data[keep], lines=lines[keep], events=events,
+                  dropped_duplicates=int(g.dropped.get("duplicate", 0)),
+                  ball_off=g.ball_off[keep], account=account)
 
 
-def _check_run_values(data: NDArray[np.float64], rows: list[tuple[str, ...]],
-                      lines: NDArray[np.int64], source: str) -> None:
-    """Check that all values are finite and time never goes backwards.
-
-    Raises
-    ------
-    RigLogError
-        The first non-finite value, or the first backwards step in ``t``, with its line.
-    """
-    bad = ~np.isfinite(data)
-    if bad.any():
-        r, c = np.argwhere(bad)[0]
-        raise RigLogError(f"{source}:{lines[r]}: non-finite value {KEYS[c]}="
-                          f"{rows[r][c]!r} ({int(bad.sum())} non-finite value(s) in "
-                          f"this run)")
-    t = data[:, 0]
-    back = np.nonzero(np.diff(t) < 0)[0]
-    if back.size:
-        k = int(back[0])
-        raise RigLogError(
-            f"{source}:{lines[k + 1]}: time goes backwards from t={float(t[k])!r} (line "
-            f"{lines[k]}) to t={float(t[k + 1])!r} without a restart marker "
-            f"('[inf] initializing hardware..')")
-
-
-def _finish_run(raw: _RunRows, source: str, duplicates: str) -> RigRun:
-    """Convert and check the rows of one run; drop repeated timestamps (or raise).
-
-    Raises
-    ------
-    RigLogError
-        A non-numeric or non-finite value, time going backwards or, with
-        ``duplicates="error"``, a repeated timestamp.
-    """
-    lines = np.asarray(raw.lines, dtype=np.int64)
-    data = _rows_to_array(raw.rows, raw.lines, source)
-    _check_run_values(data, raw.rows, lines, source)
-    t = data[:, 0]
-    dup = np.nonzero(np.diff(t) == 0)[0] + 1
-    if dup.size and duplicates == "error":
-        k = int(dup[0])
-        raise RigLogError(f"{source}:{lines[k]}: duplicate timestamp t={float(t[k])!r} "
-                          f"(same as "
-                          f"line {lines[k - 1]}); {dup.size} duplicate(s) in this run")
-    events = raw.events
-    if dup.size:
-        keep = np.ones(t.shape[0], bool)
-        keep[dup] = False
-        events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in events]
-        data, lines = data[keep], lines[keep]
-    return RigRun(data=data, lines=lines, events=events, dropped_duplicates=int(dup.size))
+def _scan(lines: Iterable[str], source: str, duplicates: str,
+          gates: Gates | None) -> RigLog:
+    """One pass over ``lines`` (without their newlines); see :func:`parse_rig_log_text`."""
+    if duplicates not in ("drop", "error"):
+        raise ValueError(f"duplicates must be 'drop' or 'error', got {duplicates!r}")
+    scan = _LogScan(source=source, duplicates=duplicates, gates=gates)
+    for lineno, raw in enumerate(lines, start=1):
+        scan.n_lines = lineno
+        _scan_line(scan, raw, lineno)
+    scan.resolve_partial(final=True)
+    if scan.n_data == 0:
+        if scan.last_nonblank == 0:
+            raise RigLogError(f"{source}: file is empty (no data lines)")
+        counts = ", ".join(f"{k}: {v}" for k, v in sorted(scan.skipped.items()) if v) or "none"
+        raise RigLogError(f"{source}: no data lines ('[inf] t=...,torque=...,...') among "
+                          f"{scan.n_lines} line(s); skipped {counts}")
+    scan.finish_current()
+    if not scan.runs:
+        why = scan.dropped_runs[0].account.line() if scan.dropped_runs else "no run"
+        raise RigLogError(f"{source}: no sample passed the checks ({why})")
+    skipped_out = {k: v for k, v in scan.skipped.items() if v}
+    return RigLog(source=source, n_lines=scan.n_lines, n_data=scan.n_data,
+                  skipped=skipped_out, warnings=scan.warnings, runs=scan.runs)
 
 
 def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
-                       duplicates: str = "drop") -> RigLog:
+                       duplicates: str = "drop", gates: Gates | None = None) -> RigLog:
     """Parse the text of a rig log.
+
+    Every data line is accounted for: each run's
+    :class:`~bfr_model.io.account.ReadAccount` (``RigRun.account``) counts the lines that
+    were cut, corrupt, duplicate, out of order, out of range or not finite, and the physical
+    gates (:func:`bfr_model.io.account.gate_samples`) decide which samples are kept.
 
     Parameters
     ----------
@@ -440,6 +575,8 @@ def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
         ``t`` with 6 significant digits (0.1 ms above 10 s) and its loop sometimes runs two
         steps within one print quantum, so real logs hold a few (17-35 per file); ``"drop"``
         keeps the first and counts the rest in ``skipped["duplicate_time"]``.
+    gates : Gates, optional
+        Bounds of the physical gates (default: from rig.yaml).
 
     Returns
     -------
@@ -448,41 +585,29 @@ def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
     Raises
     ------
     RigLogError
-        Empty text, no data line, a data line with missing or unknown keys, a non-numeric,
-        NaN or infinite value, time going backwards inside a run (no restart marker) or,
-        with ``duplicates="error"``, a repeated timestamp. The message names the line.
+        Empty text, no data line, no sample passing the gates or, with
+        ``duplicates="error"``, a repeated timestamp. The message names the line.
     """
-    if duplicates not in ("drop", "error"):
-        raise ValueError(f"duplicates must be 'drop' or 'error', got {duplicates!r}")
     if isinstance(text, bytes):
         text = text.decode("utf-8", errors="replace")
-    if not text.strip():
-        raise RigLogError(f"{source}: file is empty (no data lines)")
     lines = text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()  # text ended with a newline
-    scan = _LogScan(
-        source=source, ends_with_newline=text.endswith("\n"),
-        last_nonempty=max((i for i, ln in enumerate(lines) if ln.strip("\r \t")), default=-1))
-    for i, raw in enumerate(lines):
-        _scan_line(scan, raw, i)
+    return _scan(lines, source, duplicates, gates)
 
-    n_data = sum(len(r.rows) for r in scan.runs)
-    if n_data == 0:
-        counts = ", ".join(f"{k}: {v}" for k, v in sorted(scan.skipped.items()) if v) or "none"
-        raise RigLogError(f"{source}: no data lines ('[inf] t=...,torque=...,...') among "
-                          f"{len(lines)} line(s); skipped {counts}")
-    runs = [_finish_run(r, source, duplicates) for r in scan.runs if r.rows]
-    for run in runs:
-        scan.skipped["duplicate_time"] += run.dropped_duplicates
-    skipped_out = {k: v for k, v in scan.skipped.items() if v}
-    return RigLog(source=source, n_lines=len(lines), n_data=n_data, skipped=skipped_out,
-                  warnings=scan.warnings, runs=runs)
+
+def _file_lines(fh: BinaryIO) -> Iterator[str]:
+    """The lines of a binary file, decoded one by one (UTF-8, bad bytes replaced)."""
+    for raw in fh:
+        yield raw.rstrip(b"\n").decode("utf-8", errors="replace")
 
 
 def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
-                  warn: bool = True) -> RigLog:
-    """Read and parse a rig log file; see :func:`parse_rig_log_text`.
+                  warn: bool = True, gates: Gates | None = None) -> RigLog:
+    """Read and parse a rig log file line by line; see :func:`parse_rig_log_text`.
+
+    The file is streamed: memory holds the numbers of the runs (8 floats a line), never
+    the text.
 
     Parameters
     ----------
@@ -493,13 +618,16 @@ def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
     warn : bool
         Emit a :class:`RigLogWarning` for each recoverable problem (truncated final line,
         partial lines); they are always listed in :attr:`RigLog.warnings`.
+    gates : Gates, optional
+        Bounds of the physical gates (default: from rig.yaml).
     """
     p = Path(path)
+    gates = gates if gates is not None else Gates.from_params()
     try:
-        raw = p.read_bytes()
+        with p.open("rb") as fh:
+            log = _scan(_file_lines(fh), str(p), duplicates, gates)
     except OSError as exc:
         raise RigLogError(f"{p}: cannot read: {exc}") from exc
-    log = parse_rig_log_text(raw, source=str(p), duplicates=duplicates)
     if warn:
         for msg in log.warnings:
             warnings.warn(msg, RigLogWarning, stacklevel=2)
@@ -527,24 +655,14 @@ def read_rig_log(path: str | Path, run: int | None = None, *, duplicates: str = 
     return parse_rig_log(path, duplicates=duplicates, warn=warn).recording(run, **options)
 
 
-def _camera_backlog_end(new_fix_idx: NDArray[np.intp], min_burst: int = 10,
-                        steady: int = 10) -> int:
-    """Sample index where the start-up replay of queued camera frames ends (0 if none).
+def _camera_backlog_end(new_fix_idx: NDArray[np.intp], t: NDArray[np.float64]) -> int:
+    """Sample index where a start-up replay of queued camera frames ends (0 if none).
 
-    The backlog shows as new fixes on consecutive samples; it ends at the first fix after
-    which ``steady`` gaps in a row span two samples or more.
+    The burst is found on the fixes' own intervals, whatever the line rate
+    (:func:`bfr_model.io.timing.camera_backlog_end`).
     """
-    if new_fix_idx.size < min_burst + steady:
-        return 0
-    gaps = np.diff(new_fix_idx)
-    if np.count_nonzero(gaps[: min_burst * 4] == 1) < min_burst:
-        return 0
-    ok = (gaps >= 2).astype(np.int64)
-    run_len = np.convolve(ok, np.ones(steady, np.int64), mode="valid")
-    j = np.nonzero(run_len == steady)[0]
-    if j.size == 0:
-        return int(new_fix_idx[-1]) + 1
-    return int(new_fix_idx[j[0] + 1])
+    end = camera_backlog_end(t[new_fix_idx]) if new_fix_idx.size else 0
+    return int(new_fix_idx[end]) if end > 0 else 0
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -616,12 +734,16 @@ def _ball_fixes(run: RigRun, raw: _RigColumns, *, stale_after: float, drop_backl
     changed[1:] = (x[1:] != x[:-1]) | (y[1:] != y[:-1]) | ~seen[:-1]
     new_fix = seen & changed
     fix_idx = np.nonzero(new_fix)[0]
-    backlog_end = _camera_backlog_end(fix_idx) if drop_backlog else 0
+    backlog_end = _camera_backlog_end(fix_idx, t) if drop_backlog else 0
     last_fix = np.maximum.accumulate(np.where(new_fix, idx, -1))
     has_fix = last_fix >= 0
     age = np.where(has_fix, t - t[np.maximum(last_fix, 0)], np.inf)
     lost = _ball_lost(run.events, fix_idx, n)
     valid = seen & has_fix & (age <= stale_after) & (idx >= backlog_end) & ~lost
+    if run.ball_off is not None and run.ball_off.any():
+        valid &= ~run.ball_off
+        notes.append(f"{int(run.ball_off.sum())} sample(s) hold a ball position off the frame: "
+                     f"invalid (see meta['read_account'])")
     if backlog_end > 0:
         notes.append(f"camera backlog: fixes before t = {t[min(backlog_end, n - 1)]:.4f} s "
                      f"arrived at the loop rate (frames queued since program start) and are "
@@ -653,9 +775,60 @@ def _theta_resolution(theta_raw: NDArray[np.float64]) -> float:
     return 10.0 ** (math.floor(math.log10(magnitude)) - 5) if magnitude > 0 else 1e-6
 
 
+def phi_pairing_lag(raw_theta: NDArray[np.float64], raw_phi: NDArray[np.float64],
+                    x: NDArray[np.float64], y: NDArray[np.float64],
+                    dtheta: NDArray[np.float64], new_fix: NDArray[np.bool_],
+                    resolution: float, max_lag: int = MAX_PHI_THETA_LAG) -> int | None:
+    """The lag L [samples] with which the log's ``phi`` pairs ``theta[k - L] + atan2(x, y)``.
+
+    Tested at the new fixes where the frame turns (``|dtheta| > 1 rad/s``, so that a wrong
+    lag shows) and the log's phi agrees with the rule within 0.5 rad at some lag (its
+    estimator initialised): the lag whose median absolute residual is smallest, when that
+    is within twice theta's print resolution. None when the log's phi does not follow the
+    rule (or the frame hardly turns, or too few fixes).
+    """
+    k = np.nonzero(new_fix & (np.abs(dtheta) > 1.0))[0]
+    k = k[k >= max_lag]
+    if k.size < 20:
+        return None
+    psi = np.arctan2(x[k], y[k])
+    med = []
+    for lag in range(max_lag + 1):
+        r = raw_phi[k] - (raw_theta[k - lag] + psi)
+        r = (r + np.pi) % (2 * np.pi) - np.pi
+        r = r[np.abs(r) < 0.5]
+        med.append(float(np.median(np.abs(r))) if r.size > 0.5 * k.size else math.inf)
+    best = int(np.argmin(med))
+    return best if med[best] <= 2.0 * resolution + 1e-12 else None
+
+
+def _sensor_timing(raw: _RigColumns, fix_idx: NDArray[np.intp], backlog_end: int,
+                   lag: Any) -> dict[str, Any]:
+    """What the run's own data say about its timing (module docstring; no rig's constants).
+
+    Line rate, camera fix rate and interval after any backlog, lines per fix, and the
+    measured lag of ``dtheta`` (:class:`bfr_model.io.timing.VelocityLag`).
+    """
+    t = raw.t
+    steady = fix_idx[fix_idx >= backlog_end]
+    out: dict[str, Any] = {"line_rate_hz": line_rate(t),
+                           "line_interval_median_s": float(np.median(np.diff(t)))
+                           if t.size > 1 else float("nan"),
+                           "fixes": int(fix_idx.size), "backlog_fixes":
+                           int(np.count_nonzero(fix_idx < backlog_end)),
+                           "velocity_lag": lag.to_json()}
+    if steady.size > 2:
+        d = np.diff(t[steady])
+        out["camera_rate_hz"] = float((steady.size - 1) / (t[steady[-1]] - t[steady[0]]))
+        out["fix_interval_median_s"] = float(np.median(d))
+        out["lines_per_fix"] = float((steady[-1] - steady[0]) / (steady.size - 1))
+    return out
+
+
 def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
                   conversions: list[str], notes: list[str], shift: float, theta_res: float,
-                  backlog_end: int, phi_theta_lag: int, stale_after: float) -> dict[str, Any]:
+                  backlog_end: int, phi_theta_lag: int, stale_after: float,
+                  timing: dict[str, Any]) -> dict[str, Any]:
     """``Recording.meta`` of a converted run: provenance, conversions and rig conventions."""
     n = t.shape[0]
     return {
@@ -671,12 +844,14 @@ def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
         "theta_turn_shift": shift,
         "theta_resolution": theta_res,
         "camera_backlog_end_t": float(t[min(backlog_end, n - 1)]) if backlog_end else None,
+        "sensor_timing": timing,
         "rig_conventions": {
             "theta_sign": 1,
             "torque_sign": 1,
             "xy_frame": "world",
             "phi_theta_lag_samples": int(phi_theta_lag),
-            "dtheta_delay_s": RIG_DTHETA_DELAY_S,
+            "dtheta_delay_s": timing["velocity_lag"]["lag_s"],
+            "dtheta_delay_measured": bool(timing["velocity_lag"]["identified"]),
             "stale_after_s": float(stale_after),
             "doc": "docs/ntnu-rig-conventions.md",
         },
@@ -684,8 +859,7 @@ def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
 
 
 def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bool = True,
-                     stale_after: float = 0.1,
-                     phi_theta_lag: int = RIG_PHI_THETA_LAG_SAMPLES,
+                     stale_after: float = 0.1, phi_theta_lag: int | None = None,
                      camera_offset: tuple[float, float] = (0.0, 0.0),
                      drop_backlog: bool = True) -> Recording:
     """Convert one raw run to a :class:`Recording` in our conventions.
@@ -702,9 +876,10 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     stale_after : float
         A held fix older than this [s] is invalid (normal gaps are <= 11 ms). Also after an
         ``[inf] ball was lost`` message until the next new fix.
-    phi_theta_lag : int
-        Samples between a fix's arrival and the frame angle paired with it in ``phi``
-        (the rig's software uses 8).
+    phi_theta_lag : int, optional
+        Samples between a fix's arrival and the frame angle paired with it in ``phi``;
+        default: measured on the run (:func:`phi_pairing_lag`; the NTNU rig's software uses
+        8), 0 when the log's phi does not follow the rule.
     camera_offset : (float, float)
         Camera origin offset ``(cx, cy)`` [m] subtracted from ``x, y`` (default: none; the
         measured offsets are in docs/ntnu-rig-conventions.md).
@@ -723,13 +898,27 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
         conversions.append(f"subtracted camera offset (cx, cy) = ({cx}, {cy}) m from x, y")
     shift = _turn_shift(raw.theta, rebase_turns, conversions)
     theta = raw.theta - shift
-
+    theta_res = _theta_resolution(raw.theta)
+    new_fix = fixes.seen & (np.arange(raw.t.size) == fixes.last_fix)
+    fix_idx = np.nonzero(new_fix)[0]
+    if phi_theta_lag is None:
+        found = phi_pairing_lag(raw.theta, raw.phi, raw.x, raw.y, raw.dtheta,
+                                new_fix & (np.arange(raw.t.size) >= fixes.backlog_end),
+                                theta_res)
+        phi_theta_lag = 0 if found is None else found
+        how = ("measured on this run" if found is not None else
+               "the log's phi follows theta[k - L] + atan2(x, y) at no lag: L = 0")
+    else:
+        how = "given"
     lag_src = np.maximum(np.arange(raw.t.shape[0]) - int(phi_theta_lag), 0)
     phi_fix = theta[lag_src] + np.arctan2(bx, by)
     phi = np.where(fixes.valid, phi_fix[np.maximum(fixes.last_fix, 0)], np.nan)
     conversions.append(f"phi recomputed as theta[k - {phi_theta_lag}] + atan2(x, y) at each "
-                       f"new fix k and held (the rig's own pairing); rig phi kept in "
-                       f"extra['phi_rig']")
+                       f"new fix k and held (the rig's own pairing, L {how}); rig phi kept "
+                       "in extra['phi_rig']")
+    vlag = velocity_lag(raw.t, raw.theta, raw.dtheta)
+    notes.append(f"dtheta: {vlag.note} (measured on this run; not applied by the reader)")
+    timing = _sensor_timing(raw, fix_idx, fixes.backlog_end, vlag)
     phi_rig_ours = np.where(fixes.seen, raw.phi - shift, np.nan)
     initialised = np.abs(phi_rig_ours - phi) < 0.5
     phi_dot = np.where(fixes.valid & initialised, raw.dphi, np.nan)
@@ -744,13 +933,68 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
         extra={"phi_rig": phi_rig_ours, "dphi_rig": raw.dphi,
                "ball_seen": fixes.seen.astype(float)},
         meta=_rig_log_meta(run, raw.t, source=source, conversions=conversions, notes=notes,
-                           shift=shift, theta_res=_theta_resolution(raw.theta),
+                           shift=shift, theta_res=theta_res,
                            backlog_end=fixes.backlog_end, phi_theta_lag=phi_theta_lag,
-                           stale_after=stale_after),
+                           stale_after=stale_after, timing=timing),
     )
     rec.meta["sample_rate"] = rec.sample_rate()
     rec.meta["camera_fix_rate"] = rec.camera_fix_rate()
+    if run.account is not None:
+        rec.meta["read_account"] = run.account.to_json()
     return rec
+
+
+def _g(value: float, digits: int) -> str:
+    """``value`` printed as a C++ output stream prints a double (``digits`` significant)."""
+    return format(float(value), f".{digits}g")
+
+
+def format_rig_log(runs: Recording | list[Recording], *, digits: int = 6) -> str:
+    r"""Recordings as the text of a rig's terminal log (module docstring).
+
+    Each recording becomes one run: ``[inf] initializing hardware..``, ``[inf] done``, one
+    data line per sample, ``[inf] stopped``. ``x, y`` are the held fix (``0, 0`` where no
+    valid fix), ``phi`` the recording's ``phi`` (0 without a fix), ``dtheta`` its
+    ``theta_dot``, ``dphi`` its ``phi_dot`` (0 where absent). Numbers have ``digits``
+    significant digits, as a C++ stream prints them (the NTNU rig: 6), so what a reader gets
+    back is quantised like a real log: theta to 1 mrad above 100 rad.
+
+    Parameters
+    ----------
+    runs : Recording or list of Recording
+        The runs, in order (their clocks may restart).
+    digits : int
+        Significant digits of every number.
+
+    Returns
+    -------
+    str
+        The log's text (lines end in ``\n``).
+    """
+    recs = [runs] if isinstance(runs, Recording) else list(runs)
+    out = ["Script started by bfr_model.io.rig_log.format_rig_log"]
+    for rec in recs:
+        out += ["[inf] initializing hardware..", "[inf] done"]
+        v = rec.ball_valid
+        x = np.where(v, rec.ball_x, 0.0)
+        y = np.where(v, rec.ball_y, 0.0)
+        phi = np.where(v & np.isfinite(rec.phi), rec.phi, 0.0)
+        dphi = (np.zeros(rec.n) if rec.phi_dot is None
+                else np.where(np.isfinite(rec.phi_dot), rec.phi_dot, 0.0))
+        cols = (rec.t, rec.torque, rec.theta, phi, rec.theta_dot, dphi, x, y)
+        for row in zip(*(c.tolist() for c in cols), strict=True):
+            out.append("[inf] " + ",".join(f"{k}={_g(val, digits)}"
+                                           for k, val in zip(KEYS, row, strict=True)))
+        out.append("[inf] stopped")
+    return "\n".join(out) + "\n"
+
+
+def write_rig_log(path: str | Path, runs: Recording | list[Recording], *,
+                  digits: int = 6) -> Path:
+    """Write :func:`format_rig_log` of ``runs`` to ``path`` (a new file); returns the path."""
+    p = Path(path)
+    p.write_text(format_rig_log(runs, digits=digits))
+    return p
 
 
 def _main(argv: list[str] | None = None) -> int:

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 from bfr_diagnose.cli import main as diagnose_main
-from bfr_model.io import read_recording
+from bfr_model.io import account_line, read_recording
 from bfr_model.params import ParameterError, load_params
 from bfr_model.perturbations import load_study, rough_track, with_asperities, write_params
 
@@ -119,6 +119,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("recordings", nargs="*", type=Path, metavar="RECORDING",
                    help="rig logs (.txt), CSV or ROS 2 bags: motor work against the ideal "
                         "energy input along each (default: a simulated closed-loop run)")
+    e.add_argument("--allow-partial", action="store_true",
+                   help="use a recording even when more than 1 %% of its samples could not be "
+                        "read (the read's account on stderr says which)")
     e.add_argument("--corrected", nargs="+", type=Path, metavar="PATH",
                    help="bfr diagnose's correction: its corrected_params.yaml or its "
                         "--out-dir folder; one for all recordings or one per recording")
@@ -288,7 +291,10 @@ def _corrected_paths(args: argparse.Namespace) -> list[Path | None]:
         d = args.out_dir / f"diagnose_{rec.stem}"
         progress(f"bfr diagnose {rec} --out-dir {d}")
         with contextlib.redirect_stdout(io.StringIO()):  # its report is in d/report.md
-            code = diagnose_main([str(rec), "--out-dir", str(d), "--no-plots", "--quiet"])
+            # its own folder under --out-dir, remade on every run (as the plots are)
+            code = diagnose_main([str(rec), "--out-dir", str(d), "--no-plots", "--quiet",
+                                  "--force",
+                                  *(["--allow-partial"] if args.allow_partial else [])])
         if code != 0 or not (d / "corrected_params.yaml").is_file():
             raise ValueError(f"bfr diagnose failed on {rec} (exit {code}); run it alone to "
                              "see why")
@@ -306,8 +312,9 @@ def _energy_recorded(args: argparse.Namespace, params: Any, study: Any) -> int:
     for rec_path, cor_path in zip(args.recordings, corrected, strict=True):
         progress(f"energy along {rec_path}")
         with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            rec = read_recording(rec_path)
+            warnings.simplefilter("ignore")  # what the reader found is in its account
+            rec = read_recording(rec_path, allow_partial=args.allow_partial)
+        print(f"bfr analyze: {account_line([rec])}", file=sys.stderr, flush=True)
         cor = load_params(cor_path) if cor_path is not None else None
         res = analyze_recording(rec, params, study, cor, label=str(rec_path),
                                 nominal_source=str(args.params or "rig.yaml"),

@@ -21,6 +21,9 @@ Sections (``--only`` / ``--skip``):
 ``view``
     What watching costs: one ``sim_markers`` message, one ``bfr video`` frame.
     See :mod:`bfr_tools.bench.view`.
+``read``
+    Peak memory and speed of the streaming rig-log reader on a 200 MB log made of the real
+    logs' runs (``bfr read``). See :mod:`bfr_tools.bench.read`.
 
 Every figure is the median over repeats with their min and max (the machine's noise), next
 to its budget and whether the median meets it; a figure that cannot be measured says why
@@ -43,7 +46,7 @@ from typing import Any
 
 from bfr_model.jit import JIT_ENABLED
 
-from bfr_tools.bench import camera, diagnosis, loop, sim, view
+from bfr_tools.bench import camera, diagnosis, loop, read, sim, view
 from bfr_tools.bench.common import (
     BenchOptions,
     Figure,
@@ -55,7 +58,7 @@ from bfr_tools.bench.common import (
 
 __all__ = ["SECTION_NAMES", "format_table", "main", "run_bench", "sections"]
 
-SECTION_NAMES = ("sim", "camera", "loop", "diagnose", "view")
+SECTION_NAMES = ("sim", "camera", "loop", "diagnose", "view", "read")
 
 
 def sections() -> dict[str, Section]:
@@ -71,6 +74,8 @@ def sections() -> dict[str, Section]:
                             diagnosis.SPECS, diagnosis.run),
         "view": Section("view", "markers per message, bfr video per frame", view.SPECS,
                         view.run),
+        "read": Section("read", "streaming rig-log reader: peak memory, speed", read.SPECS,
+                        read.run),
     }
 
 

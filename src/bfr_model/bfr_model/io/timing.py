@@ -1,0 +1,289 @@
+"""Sensor timing of a recording, measured on the recording itself (no rig's constants).
+
+A rig's logger may report the frame's velocity with a lag, log at any rate, and replay a
+camera's queued frames at start-up. What one rig shows (the NTNU rig: a 6.4 ms velocity lag,
+~920 lines per second, a fix every ~6 ms) is a fact about that rig, so each quantity here is
+estimated on every recording and reported with how well the recording determines it.
+
+Velocity lag (:func:`velocity_lag`). A logged velocity ``v`` that lags the true rate of the
+logged angle ``theta`` by ``d`` integrates to ``theta`` only when advanced by ``d``:
+
+    theta(t) - theta(t0) = int_t0^t v(s + d) ds                                         (1)
+
+A velocity estimator is a filter, not only a delay: a first-order lag of time constant tau
+is, to second order, the delay tau with ``v_true = v(t + d) + c2 v''(t + d)``, ``c2 =
+-tau^2 / 2``; a moving average over a window L is the delay L / 2 with ``c2 = +L^2 / 24``.
+Both terms are measured: after d, the remaining error of (1) is ``c2 v'(t + d)`` plus a
+constant (the integral of ``c2 v''``), and c2 is its least-squares coefficient on the
+smoothed ``v'(t + d)`` (same blocks). :func:`corrected_velocity` applies both.
+
+To first order in d, ``int v(s + d) ds = int v(s) ds + d (v(t) - v(t0))``, so the error of
+the unshifted integral ``e(t) = theta(t) - theta(t0) - int_t0^t v ds`` is ``d v(t)`` plus a
+constant. An offset of v makes the integral drift, so in each block of ``window`` seconds a
+straight line ``c0 + c1 t`` is projected out of both e and v (P the projection), and d is
+their least-squares ratio ``<P e, P v> / <P v, P v>``, refined at the shift found (the
+first-order step is exact only to first order). Its standard error comes from the residual
+of (1), inflated by the residual's correlation time. A recording whose velocity hardly
+varies (a frame at constant speed) determines nothing: ``identified`` is False, and the lag
+is then irrelevant to any use of v (a shift of a constant changes nothing).
+
+Camera backlog (:func:`camera_backlog_end`). A camera that queued frames since program start
+delivers them at the logger's rate when the loop starts: fixes arrive faster than the camera
+can take them. The steady interval between fixes is the median interval over the second half
+of the run; the backlog is the initial burst of intervals shorter than half of it. A log in
+which every line brings a new fix at the camera's own rate has no burst and no backlog.
+
+Pure numpy; no ``rclpy``.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.interpolate import CubicSpline
+from scipy.signal import savgol_filter
+
+__all__ = ["VelocityLag", "camera_backlog_end", "corrected_velocity", "line_rate",
+           "velocity_lag"]
+
+FloatArray = NDArray[np.float64]
+
+
+@dataclass(frozen=True, kw_only=True)
+class VelocityLag:
+    """The lag of a logged velocity behind the rate of the logged angle (module docstring).
+
+    Attributes
+    ----------
+    lag : float
+        ``d`` of eq. (1) [s] (positive: the velocity is late); 0 when not identified.
+    std : float
+        Its standard error [s] (inf when not identified).
+    identified : bool
+        The velocity varies enough for the lag to matter and be measured: std < 1 ms, and
+        the shift removes a tenth of the error or is within two standard errors of zero.
+    rms_unshifted, rms_shifted : float
+        RMS of the detrended error of eq. (1) without and with the correction [rad].
+    note : str
+        What was found, for reports.
+    c2 : float
+        The second-order term [s^2] (module docstring; 0 when not measured).
+    c2_std : float
+        Its standard error [s^2].
+    """
+
+    lag: float
+    std: float
+    identified: bool
+    rms_unshifted: float
+    rms_shifted: float
+    note: str
+    c2: float = 0.0
+    c2_std: float = math.inf
+
+    def to_json(self) -> dict[str, float | bool | str | None]:
+        """JSON-ready dict (inf as None)."""
+        return {"lag_s": self.lag, "std_s": self.std if math.isfinite(self.std) else None,
+                "c2_s2": self.c2,
+                "c2_std_s2": self.c2_std if math.isfinite(self.c2_std) else None,
+                "identified": self.identified, "rms_unshifted_rad": self.rms_unshifted,
+                "rms_shifted_rad": self.rms_shifted, "note": self.note}
+
+
+def _detrend_blocks(y: FloatArray, k: int) -> FloatArray:
+    """``y`` with a straight line fitted out of each block of ``k`` samples (last block longer).
+
+    The projection P of the module docstring: per block, the residual of ``y`` on
+    ``[1, i]``.
+    """
+    out = np.empty_like(y)
+    nb = max(y.size // k, 1)
+    edges = np.linspace(0, y.size, nb + 1).astype(int)
+    for a, b in itertools.pairwise(edges):
+        x = np.arange(b - a, dtype=float)
+        x -= x.mean()
+        seg = y[a:b] - y[a:b].mean()
+        den = float(np.dot(x, x))
+        out[a:b] = seg - (x * float(np.dot(x, seg)) / den if den > 0 else 0.0)
+    return out
+
+
+def _integral(t: FloatArray, v: FloatArray) -> FloatArray:
+    """Cumulative trapezoid integral of v over t, starting at 0."""
+    return np.concatenate([[0.0], np.cumsum(0.5 * (v[1:] + v[:-1]) * np.diff(t))])
+
+
+def velocity_lag(t: FloatArray, theta: FloatArray, theta_dot: FloatArray, *,
+                 window: float = 4.0, dt: float | None = None,
+                 max_lag: float = 0.05) -> VelocityLag:
+    """Measure how late a logged velocity is (module docstring, eq. 1).
+
+    Parameters
+    ----------
+    t : ndarray
+        Sample times [s], increasing.
+    theta : ndarray
+        Logged angle [rad] (any resolution).
+    theta_dot : ndarray
+        Logged velocity [rad/s].
+    window : float
+        Length of the blocks in which a drift line is removed [s].
+    dt : float, optional
+        Grid step of the test [s] (default: the median sample interval, at most 2 ms).
+    max_lag : float
+        Largest lag believed [s]; a fit beyond it is reported as not identified.
+
+    Returns
+    -------
+    VelocityLag
+    """
+    t = np.asarray(t, float)
+    n = t.size
+    nothing = VelocityLag(lag=0.0, std=math.inf, identified=False, rms_unshifted=float("nan"),
+                          rms_shifted=float("nan"), note="too few samples to measure a lag")
+    if n < 50 or t[-1] - t[0] < 0.3:
+        return nothing
+    step = float(dt or min(np.median(np.diff(t)), 2e-3))
+    tg = t[0] + step * np.arange(int((t[-1] - t[0]) / step))
+    th = np.interp(tg, t, theta)
+    v = np.interp(tg, t, theta_dot)
+    k = max(round(window / step), 10)
+    edge = max(round(max_lag / step), 1)  # shifted samples beyond the ends are not used
+
+    def error(d: float) -> FloatArray:
+        vs = np.interp(tg + d, t, theta_dot)
+        e = th - th[0] - _integral(tg, vs)
+        return _detrend_blocks(e[edge:-edge], k)
+
+    hv = _detrend_blocks(v[edge:-edge], k)
+    e0 = error(0.0)
+    den = float(np.dot(hv, hv))
+    if hv.size < 20 or den <= 0.0:
+        return VelocityLag(lag=0.0, std=math.inf, identified=False, rms_unshifted=float("nan"),
+                           rms_shifted=float("nan"),
+                           note="the velocity is constant: no lag to measure, none applied")
+    d = float(np.dot(e0, hv) / den)
+    for _ in range(2):  # refine: the first-order step is exact only for small lags
+        if not abs(d) <= max_lag:
+            break
+        e = error(d)
+        d = d + float(np.dot(e, hv) / den)
+    rms0 = float(np.sqrt(np.mean(e0 ** 2)))
+    if not abs(d) <= max_lag:
+        return VelocityLag(lag=0.0, std=math.inf, identified=False, rms_unshifted=rms0,
+                           rms_shifted=rms0, note=f"fitted lag {d * 1e3:.1f} ms beyond "
+                           f"{max_lag * 1e3:.0f} ms: not identified, none applied")
+    e = error(d)
+    rms1 = float(np.sqrt(np.mean(e ** 2)))
+    std = _coefficient_std(e, den, hv.size)
+    # measured: a small standard error, and a shift that explains the error (a lag
+    # indistinguishable from zero needs no explaining)
+    identified = bool(std < 1e-3 and (rms1 < 0.9 * rms0 or abs(d) < 2.0 * std))
+    c2, c2_std = 0.0, math.inf
+    if identified:  # the second-order term: e on the smoothed v'(t + d)
+        vs = np.interp(tg + d, t, theta_dot)
+        win = max(int(0.03 / step) | 1, 5)
+        X = _detrend_blocks(savgol_filter(vs, win, 3, deriv=1, delta=step)[edge:-edge], k)
+        dx = float(np.dot(X, X))
+        if dx > 0.0:
+            c = float(np.dot(e, X) / dx)
+            c_std = _coefficient_std(e - c * X, dx, X.size)
+            if abs(c) > 3.0 * c_std:
+                c2, c2_std = c, c_std
+                e = e - c * X
+                rms1 = float(np.sqrt(np.mean(e ** 2)))
+    if identified:
+        note = (f"logged velocity lags the angle's rate by {d * 1e3:.2f} ms "
+                f"(+- {std * 1e3:.2f})" + (
+                    f", second-order term {c2 * 1e6:+.2f} ms^2 (as a first-order lag of "
+                    f"{math.sqrt(-2 * c2) * 1e3:.1f} ms)" if c2 < 0 else
+                    f", second-order term {c2 * 1e6:+.2f} ms^2 (as a moving average of "
+                    f"{math.sqrt(24 * c2) * 1e3:.1f} ms)" if c2 > 0 else "")
+                + "; corrected by that")
+    else:
+        note = (f"velocity lag not identified ({d * 1e3:.2f} +- {std * 1e3:.2f} ms; the "
+                "velocity hardly varies): none applied")
+    return VelocityLag(lag=d if identified else 0.0, std=std if identified else math.inf,
+                       identified=identified, rms_unshifted=rms0, rms_shifted=rms1, note=note,
+                       c2=c2, c2_std=c2_std)
+
+
+def _coefficient_std(resid: FloatArray, den: float, n: int) -> float:
+    """Standard error of a least-squares coefficient ``<e, x> / den`` from its residual.
+
+    Inflated by the residual's correlation time (samples to the first autocorrelation
+    below 1/e, at least one).
+    """
+    ec = resid - resid.mean()
+    var = float(np.dot(ec, ec))
+    if var <= 0.0 or den <= 0.0:
+        return 0.0
+    tau = 1
+    for lag in range(1, min(ec.size // 4, 2000)):
+        if float(np.dot(ec[:-lag], ec[lag:])) / var < math.exp(-1.0):
+            break
+        tau = lag + 1
+    return math.sqrt(var / max(n - 1, 1) * tau / den)
+
+
+def corrected_velocity(t: FloatArray, theta_dot: FloatArray, tg: FloatArray, lag: float,
+                       c2: float = 0.0) -> FloatArray:
+    """The true rate on the grid ``tg`` from a logged velocity (module docstring).
+
+    ``v(t + d) + c2 v''(t + d)`` (v by a cubic spline through its samples, ``v''`` by a cubic
+    Savitzky-Golay filter of 30 ms).
+    """
+    v = (CubicSpline(t, theta_dot)(np.clip(tg + lag, t[0], t[-1])) if t.size > 3
+         else np.interp(tg + lag, t, theta_dot))
+    if c2 == 0.0 or tg.size < 7:
+        return v
+    step = float(tg[1] - tg[0])
+    win = max(int(0.03 / step) | 1, 5)
+    return v + c2 * savgol_filter(v, win, 3, deriv=2, delta=step)
+
+
+def camera_backlog_end(fix_t: FloatArray, steady: int = 10, min_burst: int = 10) -> int:
+    """Index (into ``fix_t``) of the first fix after a start-up backlog; 0 when there is none.
+
+    Parameters
+    ----------
+    fix_t : ndarray
+        Times of the distinct fixes [s], increasing.
+    steady : int
+        Intervals in a row at the steady pace that end the burst.
+    min_burst : int
+        Fewest fast intervals that make a burst.
+
+    Returns
+    -------
+    int
+        The backlog is ``fix_t[:end]`` (module docstring).
+    """
+    fix_t = np.asarray(fix_t, float)
+    if fix_t.size < 2 * (min_burst + steady):
+        return 0
+    gaps = np.diff(fix_t)
+    typical = float(np.median(gaps[gaps.size // 2:]))
+    if typical <= 0.0:
+        return 0
+    fast = gaps < 0.5 * typical
+    if np.count_nonzero(fast[:4 * min_burst]) < min_burst:
+        return 0
+    ok = (~fast).astype(np.int64)
+    run = np.convolve(ok, np.ones(steady, np.int64), mode="valid")
+    j = np.nonzero(run == steady)[0]
+    if j.size == 0:
+        return 0  # never settles: not a backlog, the camera is simply irregular
+    return int(j[0] + 1)
+
+
+def line_rate(t: FloatArray) -> float:
+    """Mean line (sample) rate [Hz]: ``(n - 1) / (t[-1] - t[0])``; NaN below two samples."""
+    t = np.asarray(t, float)
+    if t.size < 2 or t[-1] <= t[0]:
+        return float("nan")
+    return float((t.size - 1) / (t[-1] - t[0]))
