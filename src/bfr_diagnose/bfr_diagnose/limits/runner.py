@@ -215,7 +215,7 @@ def run_cases(seed: int, indices: list[int], out: Path, duration: float, *,
         client = Client(scheduler)
     else:
         cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None, silence_logs=40)
+                               dashboard_address=":0", silence_logs=40)
         client = Client(cluster)
     n_workers = len(client.scheduler_info().get("workers", {}))
     say(f"Dask: {'scheduler ' + scheduler if scheduler else 'LocalCluster'}, "

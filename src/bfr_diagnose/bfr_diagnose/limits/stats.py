@@ -88,8 +88,8 @@ def detection_curve(x: NDArray[np.float64], hit: NDArray[np.bool_], n_boot: int,
     for _ in range(n_boot):
         i = rng.integers(0, x.size, x.size)
         ab = logistic_fit(x[i], y[i])
-        for p in boots:
-            boots[p].append(_x_at(*ab, p))
+        for p, vals in boots.items():
+            vals.append(_x_at(*ab, p))
     for (p, vals), key in zip(boots.items(), ("x50", "x90"), strict=True):
         v = np.array(vals) if vals else np.array([np.nan])
         out[key] = _x_at(a, b, p)
