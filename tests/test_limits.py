@@ -111,7 +111,7 @@ def test_bad_input_one_line_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture
 
 def test_cases_on_a_local_cluster_resume_and_report(tmp_path: Path) -> None:
     out = tmp_path / "run"
-    # seed 31: case 0 clean on the rigid truth, case 1 a viscous friction of 1.4 F on the
+    # seed 31: case 0 clean on the rigid truth, case 1 a viscous friction of 0.14 F on the
     # contact model (another model structure), both written as bags
     figs = run_cases(31, [0, 1], out, 8.0, workers=2, progress=False)
     assert figs["ran"] == 2 and figs["workers"] == 2

@@ -15,7 +15,7 @@ Examples::
     scripts/bfr limits run --seed 1 --cases 1000 --out limits-1 --scheduler tcp://host:8786
     scripts/bfr limits report limits-1
 
-Exit codes: 0 success, 2 bad input.
+Exit codes: 0 success, 2 bad input, 130 interrupted (the records so far are kept).
 """
 
 from __future__ import annotations
@@ -64,7 +64,7 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from bfr_diagnose.limits.runner import run_cases  # noqa: PLC0415 - dask only when running
+    from bfr_diagnose.limits.runner import done_indices, run_cases  # noqa: PLC0415 - dask only when running
 
     if args.cases < 1 or args.first < 0 or args.workers < 1:
         return _error("need --cases >= 1, --first >= 0 and --workers >= 1")
@@ -89,9 +89,14 @@ def _run(args: argparse.Namespace) -> int:
     def say(msg: str) -> None:
         print(f"[limits {time.perf_counter() - t0:7.1f} s] {msg}", file=sys.stderr, flush=True)
 
-    figs = run_cases(args.seed, list(range(args.first, args.first + args.cases)), out,
-                     args.duration, params=args.params, workers=args.workers,
-                     scheduler=args.scheduler, progress=not args.no_progress, say=say)
+    try:
+        figs = run_cases(args.seed, list(range(args.first, args.first + args.cases)), out,
+                         args.duration, params=args.params, workers=args.workers,
+                         scheduler=args.scheduler, progress=not args.no_progress, say=say)
+    except KeyboardInterrupt:
+        print(f"\nbfr limits: interrupted; {len(done_indices(out))} case records kept in "
+              f"{out / 'cases'}: the same command continues", file=sys.stderr)
+        return 130
     figs.update(seed=args.seed, first=args.first, cases=args.cases,
                 finished=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()))
     with (out / "throughput.jsonl").open("a") as fh:
