@@ -32,6 +32,7 @@ from bfr_diagnose.synth import (
 from bfr_model.io.csv_io import write_csv
 from bfr_model.io.rig_log import read_rig_log, write_rig_log
 from bfr_model.params import RigParams, load_params
+from bfr_model.recording import Recording
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT.parent / "shared" / "data" / "ntnu-rig"
@@ -60,7 +61,7 @@ CASES = {
 
 
 def _rec(changes: dict, seed: int, log: LogConventions | None = None,
-         latency: float = 0.0, duration: float = DUR):  # noqa: ANN202
+         latency: float = 0.0, duration: float = DUR) -> Recording:
     base = RigParams()
     plant = base.replace(**changes) if changes else base
     for k in range(4):

@@ -336,8 +336,10 @@ class Problem:
     # -- Jacobians -----------------------------------------------------------------------
     def sensor_jacobian(self, chosen: Chosen, sensors: list[FloatArray], w0: FloatArray,
                         key: Any = None) -> FloatArray:
-        """Columns of every part's sensor parameters (zero outside the part); forward
-        differences of one ``scale`` each (cached under ``key``)."""
+        """Columns of every part's sensor parameters (zero outside the part).
+
+        Forward differences of one ``scale`` each (cached under ``key``).
+        """
         if key is not None and ("sensors", key) in self._jac_cache:
             return self._jac_cache[("sensors", key)]
         cols = []
@@ -538,7 +540,6 @@ class _Fitter:
         if self._last is None:
             return np.zeros((self.size, xn.size))
         base = self._last[1]
-        chosen, sensors = self.unpack(xn)
         lens = [b.size for b in base]
         offs = np.concatenate([[0], np.cumsum(lens)]).astype(int)
         J = np.zeros((int(offs[-1]), xn.size))
@@ -694,8 +695,10 @@ class LinearScreen:
         return (1.0 - c1 / c0 if c0 > 0 else 0.0), b_e, c_tr
 
     def best_column(self, w: FloatArray, cols: list[FloatArray]) -> int:
-        """Index of the single column that lowers the training cost most (with the sensors
-        refitted): the largest ``(E^T w_perp)^2 / |E|^2``."""
+        """Index of the single column that lowers the training cost most.
+
+        With the sensors refitted: the largest ``(E^T w_perp)^2 / |E|^2``.
+        """
         w = np.where(np.isfinite(w), w, 0.0)
         wp = self._perp(w[self.train])
         C = self._perp(np.stack([c[self.train] for c in cols], axis=1))
@@ -708,8 +711,10 @@ class LinearScreen:
 def linear_gain(w: FloatArray, D_s: FloatArray, D_e: FloatArray, train: NDArray[np.bool_],
                 test: NDArray[np.bool_], clip0: NDArray[np.bool_] | None = None
                 ) -> tuple[float, FloatArray, float]:
-    """Held-out gain of the linear fit ``w + [D_s D_e] b`` against ``w + D_s b_s``
-    (one-off :class:`LinearScreen`)."""
+    """Held-out gain of the linear fit ``w + [D_s D_e] b`` against ``w + D_s b_s``.
+
+    A one-off :class:`LinearScreen`.
+    """
     return LinearScreen(D_s, train, test).gain(w, D_e, clip0)
 
 
@@ -808,8 +813,10 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
 
 def _refit(prob: Problem, chosen: Chosen, sensors: list[FloatArray], passes: int = 2
            ) -> tuple[Chosen, list[FloatArray]]:
-    """Reweight from the current residual and refit the chosen effects and the sensors
-    (twice: the weights follow the refitted residual)."""
+    """Reweight from the current residual and refit the chosen effects and the sensors.
+
+    Twice: the weights follow the refitted residual.
+    """
     for _ in range(passes):
         prob.reweight(chosen, sensors)
         fit = (prob.fit(chosen[:-1], chosen[-1][0], chosen[-1][1], sensors, max_nfev=25)
@@ -821,8 +828,7 @@ def _refit(prob: Problem, chosen: Chosen, sensors: list[FloatArray], passes: int
 
 def effective_samples(prob: Problem, w: FloatArray, tau_noise: float
                       ) -> tuple[float, float]:
-    """The residual's autocorrelation time [samples] and the effective number of training
-    samples.
+    """The residual's autocorrelation time [samples] and the effective training samples.
 
     The time is the larger of the noise's and of the current residual's (the intervals'
     inflation: a residual that is correlated beyond the noise makes its samples count

@@ -32,6 +32,13 @@ __all__ = ["corrected_yaml", "format_text", "phi_dot_profiles", "sensor_yaml",
 _UNITS = {"theta": "rad", "theta_dot": "rad/s", "ball_angle": "rad"}
 
 
+def _used(row: dict[str, Any]) -> str:
+    """'yes', or 'no' with the reason a per-recording value was left out of the joint one."""
+    if row.get("used"):
+        return "yes"
+    return "no" + (": " + row["degenerate"] if row.get("degenerate") else "")
+
+
 def _num(x: Any, fmt: str = ".4g") -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "n/a"
@@ -175,7 +182,7 @@ def _md_physics(d: Diagnosis) -> list[str]:
         for r in per:
             L.append(f"| {Path(r['recording']).name} | {r['effect']} | {r['name']} | "
                      f"{r['value']:.4g} | {_num(r['ci95'][0])} .. {_num(r['ci95'][1])} | "
-                     f"{'yes' if r.get('used') else 'no' + (': ' + r['degenerate'] if r['degenerate'] else '')} |")
+                     f"{_used(r)} |")
         L.append("")
     return L
 

@@ -347,7 +347,6 @@ class ResidualEvaluator:
             sensor = SensorCorrection(latency=float(sensor or 0.0))
         prep = self.prep
         model = RigidModel(params)
-        ns = self._grid.size
         g = self._grid
         u = prep.u_for(sensor)
         if not prep.has_ball:

@@ -410,8 +410,9 @@ def contact_recording(plant: RigParams, controller_params: RigParams, cfg: Synth
 def held_frame_recording(plant: RigParams, cfg: SynthConfig, rng: np.random.Generator, *,
                          theta: float = 0.0, phi0: float = 0.35, phi_dot0: float = 0.0,
                          source: str = "synthetic (frame held)") -> Recording:
-    """The frame held still, the ball rolling freely on it and settling (a rig's frame-held
-    run, like the NTNU ``rolling_data``).
+    """The frame held still, the ball rolling freely on it and settling.
+
+    A rig's frame-held run, like the NTNU ``rolling_data``.
 
     The rigid plant with the frame's inertia made enormous (the frame does not move; the
     ball's torque on it turns it by nanoradians), no torque, the ball started at ``phi0``

@@ -213,9 +213,11 @@ def velocity_lag(t: FloatArray, theta: FloatArray, theta_dot: FloatArray, *,
 
 
 def _coefficient_std(resid: FloatArray, den: float, n: int) -> float:
-    """Standard error of a least-squares coefficient ``<e, x> / den`` from its residual,
-    inflated by the residual's correlation time (samples to the first autocorrelation
-    below 1/e, at least one)."""
+    """Standard error of a least-squares coefficient ``<e, x> / den`` from its residual.
+
+    Inflated by the residual's correlation time (samples to the first autocorrelation
+    below 1/e, at least one).
+    """
     ec = resid - resid.mean()
     var = float(np.dot(ec, ec))
     if var <= 0.0 or den <= 0.0:
@@ -230,9 +232,11 @@ def _coefficient_std(resid: FloatArray, den: float, n: int) -> float:
 
 def corrected_velocity(t: FloatArray, theta_dot: FloatArray, tg: FloatArray, lag: float,
                        c2: float = 0.0) -> FloatArray:
-    """The true rate on the grid ``tg`` from a logged velocity (module docstring):
+    """The true rate on the grid ``tg`` from a logged velocity (module docstring).
+
     ``v(t + d) + c2 v''(t + d)`` (v by a cubic spline through its samples, ``v''`` by a cubic
-    Savitzky-Golay filter of 30 ms)."""
+    Savitzky-Golay filter of 30 ms).
+    """
     v = (CubicSpline(t, theta_dot)(np.clip(tg + lag, t[0], t[-1])) if t.size > 3
          else np.interp(tg + lag, t, theta_dot))
     if c2 == 0.0 or tg.size < 7:

@@ -7,8 +7,12 @@ it as a subprocess, each time with an empty ``BFR_CACHE_DIR`` so that the noise-
 calibrated anew (a first diagnosis of a new recording; later runs of the same kind reuse the
 cache). Wall time is measured around the subprocess; the peak resident memory is the
 child's own ``ru_maxrss`` from ``os.wait4`` (it covers the child's waited-for descendants
-too). ``bfr blindtest --cases N --json`` is timed the same way (its default recording
-length, workers and null runs; a small case count keeps the bench short).
+too). Ten recordings of one rig diagnosed together (one call, one set of physics, each
+recording its own sensor timing): ten closed-loop bags of ``diagnose_duration / 2`` seconds
+(seeds 1-10, the ball started at different places) made the same way, then
+``bfr diagnose <bag1> ... <bag10> --json --no-plots --quiet`` timed like the single one.
+``bfr blindtest --cases N --json`` is timed the same way (its default recording length,
+workers and null runs; a small case count keeps the bench short).
 """
 
 from __future__ import annotations
@@ -41,6 +45,10 @@ SPECS: list[FigureSpec] = [
                Budget("<", 60.0)),
     FigureSpec("diagnose.peak_mib", "bfr diagnose, 60 s recording: peak memory (RSS)", "MiB",
                Budget("<", 2048.0)),
+    FigureSpec("diagnose.ten_wall_s", "bfr diagnose, ten recordings together: wall time", "s",
+               Budget("<", 300.0)),
+    FigureSpec("diagnose.ten_peak_mib", "bfr diagnose, ten recordings together: peak memory",
+               "MiB", Budget("<", 2048.0)),
     FigureSpec("diagnose.blindtest_wall_s", "bfr blindtest: wall time", "s"),
     FigureSpec("diagnose.blindtest_peak_mib", "bfr blindtest: peak memory (RSS)", "MiB"),
 ]
@@ -160,6 +168,7 @@ def _run(opts: BenchOptions, say: Progress, work: Path) -> list[Figure]:
             figs.append(Figure(spec_w, walls, note=note, extra={"verdict": verdict}))
             figs.append(Figure(spec_m, mems, note="ru_maxrss of the diagnose process "
                                                  "(os.wait4)"))
+    figs += _ten(opts, say, work, env, duration)
     cases = 1 if opts.quick else opts.blindtest_cases
     spec_b, spec_bm = _BY_KEY["diagnose.blindtest_wall_s"], _BY_KEY["diagnose.blindtest_peak_mib"]
     say(f"diagnose: bfr blindtest --cases {cases} (cold null cache)")
@@ -187,3 +196,44 @@ def _run(opts: BenchOptions, say: Progress, work: Path) -> list[Figure]:
         figs.append(Figure(spec_bm, [m], note="ru_maxrss of the blindtest process tree "
                                               "(os.wait4)"))
     return figs
+
+
+def _ten(opts: BenchOptions, say: Progress, work: Path, env: dict[str, str],
+         duration: float) -> list[Figure]:
+    """Ten recordings of one rig diagnosed together (module docstring)."""
+    spec_w, spec_m = _BY_KEY["diagnose.ten_wall_s"], _BY_KEY["diagnose.ten_peak_mib"]
+    each = duration / 2.0
+    if duration != 60.0:  # the budget is for ten recordings of 30 s
+        spec_w = replace(spec_w, label=f"bfr diagnose, ten {each:g} s recordings: wall time",
+                         budget=None)
+        spec_m = replace(spec_m, label=f"bfr diagnose, ten {each:g} s recordings: peak memory",
+                         budget=None)
+    bags = []
+    for k in range(10):
+        say(f"diagnose: recording {k + 1}/10 of {each:g} s (bfr simulate --controller)")
+        out = work / f"ten{k}.mcap"
+        _, _, code = run_measured(
+            _cli("simulate", "--controller", "--duration", f"{each:g}", "--seed", str(k + 1),
+                 "--phi", f"{0.3 * k:.2f}", "--out", str(out), "--json"),
+            env, work / f"ten{k}.out", work / f"ten{k}.err", 600.0)
+        if code != 0 or not (work / f"ten{k}").exists():
+            reason = f"recording {k + 1} failed (exit {code}): {_tail(work / f'ten{k}.err')}"
+            return [not_measured(spec_w, reason), not_measured(spec_m, reason)]
+        bags.append(str(work / f"ten{k}"))
+    say("diagnose: bfr diagnose on the ten recordings together, cold null cache")
+    cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
+    w, m, c = run_measured(_cli("diagnose", *bags, "--json", "--no-plots", "--quiet"),
+                           {**env, "BFR_CACHE_DIR": str(cache)}, work / "ten.out",
+                           work / "ten.err", 1800.0)
+    if c != 0:
+        reason = f"bfr diagnose exit {c}: {_tail(work / 'ten.err')}"
+        return [not_measured(spec_w, reason), not_measured(spec_m, reason)]
+    try:
+        verdict = str(json.loads((work / "ten.out").read_text()).get("verdict", ""))
+    except (OSError, ValueError):
+        verdict = ""
+    say(f"diagnose: ten recordings {w:.1f} s wall, peak RSS {m:.0f} MiB")
+    note = (f"ten {each:g} s closed-loop bags (seeds 1-10), one `bfr diagnose <10 bags> --json "
+            f"--no-plots --quiet`, empty BFR_CACHE_DIR; 1 run; verdict: {verdict}")
+    return [Figure(spec_w, [w], note=note, extra={"verdict": verdict}),
+            Figure(spec_m, [m], note="ru_maxrss of the diagnose process (os.wait4)")]
