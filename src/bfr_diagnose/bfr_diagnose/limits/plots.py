@@ -56,7 +56,8 @@ def _detection(plt: Any, rows: list[dict[str, Any]], summary: dict[str, Any], pa
                     kk, n = int(hit[sel].sum()), int(sel.sum())
                     wl, wh = wilson(kk, n)
                     c = 0.5 * (lo + hi) + (k - 0.5) * 0.04
-                    ax.errorbar(10 ** c, kk / n, yerr=[[kk / n - wl], [wh - kk / n]], fmt="o",
+                    ax.errorbar(10 ** c, kk / n, yerr=[[max(kk / n - wl, 0.0)],
+                                                       [max(wh - kk / n, 0.0)]], fmt="o",
                                 ms=3, color=_COLOURS[tool], lw=0.8)
             ax.plot(10 ** xs, 1.0 / (1.0 + np.exp(-np.clip(m["a"] + m["b"] * xs, -30, 30))),
                     color=_COLOURS[tool], label=_LABELS[tool])

@@ -50,7 +50,9 @@ def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
     den = 1.0 + z * z / n
     mid = p + z * z / (2 * n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return max(0.0, (mid - half) / den), min(1.0, (mid + half) / den)
+    lo = 0.0 if k == 0 else max(0.0, (mid - half) / den)
+    hi = 1.0 if k == n else min(1.0, (mid + half) / den)
+    return lo, hi
 
 
 def logistic_fit(x: NDArray[np.float64], y: NDArray[np.float64], iters: int = 50
@@ -91,7 +93,8 @@ def detection_curve(x: NDArray[np.float64], hit: NDArray[np.bool_], n_boot: int,
         for p, vals in boots.items():
             vals.append(_x_at(*ab, p))
     for (p, vals), key in zip(boots.items(), ("x50", "x90"), strict=True):
-        v = np.array(vals) if vals else np.array([np.nan])
+        # censored values (never reached in the right way) kept as far outside the range
+        v = np.clip(np.array(vals), -9.0, 9.0) if vals else np.array([np.nan])
         out[key] = _x_at(a, b, p)
         out[f"{key}_lo"] = float(np.percentile(v, 2.5)) if n_boot else float("nan")
         out[f"{key}_hi"] = float(np.percentile(v, 97.5)) if n_boot else float("nan")
@@ -208,7 +211,9 @@ def summarise(rows: list[dict[str, Any]], n_boot: int = 400, seed: int = 0) -> d
 def _size_text(e: str, m: dict[str, Any], key: str) -> str:
     """A 50 %/90 % size with its interval, censored to the drawn range."""
     def fmt(x: float) -> str:
-        if not math.isfinite(x) or x > 1.0:
+        if math.isnan(x):
+            return "n/a"
+        if x > 1.0:
             return "> 10 F"
         if x < -1.0:
             return "< 0.1 F"
