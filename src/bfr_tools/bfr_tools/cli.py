@@ -45,7 +45,7 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
         "prove bfr diagnose on recordings with hidden effects (confusion matrix, accuracy)",
     ),
     "limits": (
-        "bfr_diagnose.limits.cli",
+        "bfr_tools.limits",
         "main",
         "detection limits: randomized blind test on Dask beside PySINDy (run, report)",
     ),

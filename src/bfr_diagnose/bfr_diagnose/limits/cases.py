@@ -34,8 +34,8 @@ from bfr_model.params import RigParams
 from bfr_diagnose.blindtest import CONTACT_EFFECTS, SensorDraw, draw_sensors
 from bfr_diagnose.effects import EFFECT_NAMES, MIN_SIZE, SHAPE_ORDERS
 
-__all__ = ["FLOOR", "GAIN_SCALES", "KIND_PATTERN", "ORBIT_SPEEDS", "LimitCase", "draw_case",
-           "effect_changes"]
+__all__ = ["FLOOR", "GAIN_SCALES", "KIND_PATTERN", "ORBIT_SPEEDS", "SCALAR_EFFECTS", "LimitCase",
+           "draw_case", "effect_changes"]
 
 #: Reference size of each effect [effect_size units]: ten times its reporting floor.
 FLOOR: dict[str, float] = {name: 10.0 * MIN_SIZE[name] for name in EFFECT_NAMES}
@@ -45,6 +45,8 @@ ORBIT_SPEEDS = (2.1, 2.4, 2.7)
 GAIN_SCALES = (0.5, 1.0, 2.0)
 #: Kind of case ``index % 20`` (number of concealed effects).
 KIND_PATTERN = (0, 1, 2, 1, 0, 1, 3, 1, 0, 2, 1, 2, 0, 1, 2, 1, 0, 3, 2, 1)
+#: Effects set by scalar parameters (a node's ``-p`` parameters).
+SCALAR_EFFECTS = tuple(e for e in EFFECT_NAMES if e not in ("frame_shape", "track_bumps"))
 CONTACT_SHARE = 0.25
 NOISE_RANGE = (5e-5, 3e-4)       # [m] camera noise per axis, log-uniform
 
@@ -164,12 +166,20 @@ def effect_changes(name: str, size: float, base: RigParams, rng: np.random.Gener
     raise ValueError(f"no draw for effect {name!r}")
 
 
-def draw_case(seed: int, index: int, base: RigParams) -> LimitCase:
-    """The case ``index`` of the run ``seed`` (module docstring)."""
+def draw_case(seed: int, index: int, base: RigParams, truth: str | None = None) -> LimitCase:
+    """The case ``index`` of the run ``seed`` (module docstring).
+
+    ``truth`` names another recorder of the truth (e.g. ``nodes``: the node suite's
+    simulator, camera and controller, :mod:`bfr_tools.limits`), which then replaces the
+    drawn model structure; its effects are drawn from :data:`SCALAR_EFFECTS` (those a
+    node parameter sets).
+    """
     rng = np.random.default_rng([seed, index])
     n_eff = KIND_PATTERN[index % len(KIND_PATTERN)]
     generator = "contact" if rng.random() < CONTACT_SHARE else "rigid"
     pool = CONTACT_EFFECTS if generator == "contact" else EFFECT_NAMES
+    if truth is not None:
+        generator, pool = truth, SCALAR_EFFECTS
     effects: tuple[str, ...] = ()
     while len(effects) < n_eff:  # distinct; ball mass (which scales J_b) not with J_b
         e = str(rng.choice(pool))
@@ -185,7 +195,7 @@ def draw_case(seed: int, index: int, base: RigParams) -> LimitCase:
     writer = "bag" if rng.random() < 0.25 else "rig_log"
     sensors = draw_sensors(rng, writer)
     noise = float(math.exp(rng.uniform(*np.log(NOISE_RANGE))))
-    rigid = generator == "rigid"
+    rigid = generator != "contact"
     speed = float(rng.choice(ORBIT_SPEEDS)) if rigid else None
     gain = float(rng.choice(GAIN_SCALES)) if rigid else None
     return LimitCase(index=index, seed=seed, generator=generator, effects=effects, sizes=sizes,

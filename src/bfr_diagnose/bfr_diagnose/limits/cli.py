@@ -40,7 +40,7 @@ def _error(msg: str) -> int:
     return 2
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser(truths: tuple[str, ...] = ()) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="bfr limits", description=__doc__.split("\n\n")[0],
                                  epilog=__doc__.split("\n\n", 1)[1],
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -54,6 +54,9 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--workers", type=int, default=2, help="LocalCluster workers (2)")
     r.add_argument("--scheduler", help="address of an existing Dask scheduler")
     r.add_argument("--params", help="nominal parameter YAML (default: rig.yaml)")
+    r.add_argument("--truth", choices=("model", *truths), default="model",
+                   help="the truth: 'model' (rigid and contact models, offline; default)"
+                   + "".join(f", '{t}'" for t in truths))
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     p = sub.add_parser("report", help="table, statistics, figures and report.md of a run")
     p.add_argument("out", help="the run's folder")
@@ -63,7 +66,7 @@ def _parser() -> argparse.ArgumentParser:
     return ap
 
 
-def _run(args: argparse.Namespace) -> int:
+def _run(args: argparse.Namespace, recorders: dict[str, Any]) -> int:
     from bfr_diagnose.limits.runner import done_indices, run_cases  # noqa: PLC0415 - dask only when running
 
     if args.cases < 1 or args.first < 0 or args.workers < 1:
@@ -74,9 +77,10 @@ def _run(args: argparse.Namespace) -> int:
         return _error(f"parameter file {args.params} not found")
     out = Path(args.out)
     meta_path = out / "run.json"
-    meta = {"seed": args.seed, "duration": args.duration, "params": args.params}
+    meta = {"seed": args.seed, "duration": args.duration, "params": args.params,
+            "truth": args.truth}
     if meta_path.is_file():
-        old = json.loads(meta_path.read_text())
+        old = {"truth": "model", **json.loads(meta_path.read_text())}
         if {k: old.get(k) for k in meta} != meta:
             return _error(f"{out} holds a run with {dict((k, old.get(k)) for k in meta)}; "
                           "use another --out (nothing changed)")
@@ -92,7 +96,9 @@ def _run(args: argparse.Namespace) -> int:
     try:
         figs = run_cases(args.seed, list(range(args.first, args.first + args.cases)), out,
                          args.duration, params=args.params, workers=args.workers,
-                         scheduler=args.scheduler, progress=not args.no_progress, say=say)
+                         scheduler=args.scheduler, progress=not args.no_progress, say=say,
+                         truth=None if args.truth == "model" else args.truth,
+                         recorder=recorders.get(args.truth))
     except KeyboardInterrupt:
         print(f"\nbfr limits: interrupted; {len(done_indices(out))} case records kept in "
               f"{out / 'cases'}: the same command continues", file=sys.stderr)
@@ -125,10 +131,15 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``bfr limits``; returns 0 on success, 2 on bad input."""
-    args = _parser().parse_args(argv)
-    return _run(args) if args.command == "run" else _report(args)
+def main(argv: list[str] | None = None, recorders: dict[str, Any] | None = None) -> int:
+    """Entry point of ``bfr limits``; returns 0 on success, 2 on bad input.
+
+    ``recorders`` adds truths by name (``run --truth NAME``), each a
+    :data:`bfr_diagnose.limits.runner.Recorder` (``bfr_tools.limits`` adds ``nodes``).
+    """
+    recorders = recorders or {}
+    args = _parser(tuple(recorders)).parse_args(argv)
+    return _run(args, recorders) if args.command == "run" else _report(args)
 
 
 if __name__ == "__main__":

@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 from bfr_model.params import RigParams, load_params
+from bfr_model.recording import Recording
 
 from bfr_diagnose.api import DiagnoseOptions, diagnose_recording
 from bfr_diagnose.effects import EFFECT_NAMES, EFFECTS
@@ -34,7 +35,7 @@ from bfr_diagnose.limits.cases import LimitCase, draw_case
 from bfr_diagnose.limits.generate import case_recording, controller_config, read_back
 from bfr_diagnose.limits.peer import peer_diagnose
 
-__all__ = ["case_path", "done_indices", "param_error", "run_case", "run_cases"]
+__all__ = ["Recorder", "case_path", "done_indices", "param_error", "run_case", "run_cases"]
 
 
 def param_error(name: str, true: list[float], est: list[float], base: RigParams) -> float:
@@ -72,7 +73,9 @@ def _case_columns(case: LimitCase) -> dict[str, Any]:
     ctrl = controller_config(case)
     row: dict[str, Any] = {
         "index": case.index, "seed": case.seed, "noise_seed": case.noise_seed,
-        "generator": case.generator, "kind": case.kind, "effects": ";".join(case.effects),
+        "generator": case.generator, "kind": case.kind,
+        "sensors_applied": case.generator in ("rigid", "contact"),
+        "effects": ";".join(case.effects),
         "n_effects": len(case.effects), "changes": json.dumps(case.changes, default=list),
         "truth": json.dumps(case.truth), "writer": s.writer, "velocity_lag": s.velocity_lag,
         "torque_delay": s.torque_delay, "log_rate": s.log_rate, "camera_rate": s.camera_rate,
@@ -88,26 +91,39 @@ def _case_columns(case: LimitCase) -> dict[str, Any]:
     return row
 
 
-def run_case(seed: int, index: int, duration: float, params: str | None = None
-             ) -> dict[str, Any]:
+#: ``recorder(case, base, duration) -> (runs, loop)``: another source of a case's truth
+#: (the recordings as read back, and ``ball_rolling``, ``rms_torque``, ``mean_phi_dot``).
+Recorder = Callable[[LimitCase, RigParams, float], tuple[list[Recording], dict[str, Any]]]
+
+
+def _model_recorder(case: LimitCase, base: RigParams, duration: float
+                    ) -> tuple[list[Recording], dict[str, Any]]:
+    """The offline truths (:mod:`.generate`), written and read back."""
+    rec = case_recording(case, base, duration)
+    loop = dict(rec.meta.get("loop", {}))
+    loop["ball_rolling"] = bool(rec.meta.get("ball_rolled"))
+    return read_back(rec, case.sensors.writer), loop
+
+
+def run_case(seed: int, index: int, duration: float, params: str | None = None,
+             truth: str | None = None, recorder: Recorder | None = None) -> dict[str, Any]:
     """Draw, simulate, write, read back, diagnose (bfr and the peer) and score one case.
 
-    A case whose simulation or diagnosis fails is a record too (``status`` names why), so
-    that a run never stops and never retries it silently.
+    ``truth`` and ``recorder`` replace the offline truths by another recorder (the node
+    suite: :mod:`bfr_tools.limits`). A case whose simulation or diagnosis fails is a record
+    too (``status`` names why), so that a run never stops and never retries it silently.
     """
     base = load_params(params)
-    case = draw_case(seed, index, base)
+    case = draw_case(seed, index, base, truth)
     row = _case_columns(case)
     row["duration"] = duration
     t0 = time.perf_counter()
     try:
-        rec = case_recording(case, base, duration)
-        runs = read_back(rec, case.sensors.writer)
-    except (ValueError, RuntimeError, FloatingPointError) as exc:
+        runs, loop = (recorder or _model_recorder)(case, base, duration)
+    except (ValueError, RuntimeError, FloatingPointError, OSError) as exc:
         row.update(status=f"simulation failed: {exc}", t_sim=time.perf_counter() - t0)
         return row
-    loop = rec.meta.get("loop", {})
-    row.update(rolled=bool(rec.meta.get("ball_rolled")),
+    row.update(rolled=bool(loop.get("ball_rolling")),
                rms_torque=float(loop.get("rms_torque", float("nan"))),
                mean_phi_dot=float(loop.get("mean_phi_dot", float("nan"))),
                t_sim=time.perf_counter() - t0)
@@ -177,8 +193,8 @@ def _bar(done: int, total: int, t0: float, width: int = 30) -> str:
 
 def run_cases(seed: int, indices: list[int], out: Path, duration: float, *,
               params: str | None = None, workers: int = 2, scheduler: str | None = None,
-              progress: bool = True, say: Callable[[str], None] | None = None
-              ) -> dict[str, Any]:
+              progress: bool = True, say: Callable[[str], None] | None = None,
+              truth: str | None = None, recorder: Recorder | None = None) -> dict[str, Any]:
     """Run the cases not yet on disk on Dask; returns timing figures of this run.
 
     Parameters
@@ -202,6 +218,8 @@ def run_cases(seed: int, indices: list[int], out: Path, duration: float, *,
         Draw a progress bar on stderr.
     say : callable, optional
         Progress messages.
+    truth, recorder : optional
+        Another recorder of the truth (:func:`run_case`).
     """
     from dask.distributed import Client, LocalCluster, as_completed  # noqa: PLC0415 - optional heavy dependency
 
@@ -224,8 +242,8 @@ def run_cases(seed: int, indices: list[int], out: Path, duration: float, *,
     done = 0
     times: list[float] = []
     try:
-        futs = [client.submit(run_case, seed, i, duration, params, key=f"case-{seed}-{i}",
-                              pure=False) for i in todo]
+        futs = [client.submit(run_case, seed, i, duration, params, truth, recorder,
+                              key=f"case-{seed}-{i}", pure=False) for i in todo]
         for fut in as_completed(futs):
             row = fut.result()
             _write_record(out, row)
