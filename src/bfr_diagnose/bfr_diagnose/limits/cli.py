@@ -59,7 +59,9 @@ def _parser(truths: tuple[str, ...] = ()) -> argparse.ArgumentParser:
                    + "".join(f", '{t}'" for t in truths))
     r.add_argument("--no-progress", action="store_true", help="no progress bar")
     p = sub.add_parser("report", help="table, statistics, figures and report.md of a run")
-    p.add_argument("out", help="the run's folder")
+    p.add_argument("out", help="the run's folder (the report is written there)")
+    p.add_argument("--also", action="append", default=[], metavar="RUN",
+                   help="pool the records of another run (e.g. --truth nodes); repeatable")
     p.add_argument("--bootstrap", type=int, default=400, help="bootstrap resamples (400)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
     p.add_argument("--json", action="store_true", help="print summary.json")
@@ -117,9 +119,11 @@ def _report(args: argparse.Namespace) -> int:
     from bfr_diagnose.limits.stats import load_records, summarise, write_report  # noqa: PLC0415 - keeps `run` light
 
     out = Path(args.out)
-    if not (out / "cases").is_dir():
-        return _error(f"{out} has no cases/ folder (not a bfr limits run)")
-    rows = load_records(out)
+    runs = [out, *map(Path, args.also)]
+    for run in runs:
+        if not (run / "cases").is_dir():
+            return _error(f"{run} has no cases/ folder (not a bfr limits run)")
+    rows = load_records(*runs)
     if not rows:
         return _error(f"{out}/cases holds no records")
     summary: dict[str, Any] = summarise(rows, n_boot=args.bootstrap, seed=0)

@@ -38,6 +38,7 @@ __all__ = ["TOOLS", "detection_curve", "load_records", "logistic_fit", "summaris
            "wilson", "write_report"]
 
 TOOLS = ("bfr", "peer")
+_GENERATORS = ("rigid", "contact", "nodes")
 Z95 = 1.959963984540054
 _RIDGE = 1.0 / 200.0
 
@@ -101,10 +102,13 @@ def detection_curve(x: NDArray[np.float64], hit: NDArray[np.bool_], n_boot: int,
     return out
 
 
-def load_records(out: Path) -> list[dict[str, Any]]:
-    """Every case record of a run, by index."""
-    rows = [json.loads(p.read_text()) for p in sorted((out / "cases").glob("case_*.json"))]
-    return sorted(rows, key=lambda r: r["index"])
+def load_records(*outs: Path) -> list[dict[str, Any]]:
+    """Every case record of one or more runs, by run and index."""
+    rows = []
+    for out in outs:
+        rows += sorted((json.loads(p.read_text()) for p in (out / "cases").glob("case_*.json")),
+                       key=lambda r: r["index"])
+    return rows
 
 
 def _found(r: dict[str, Any], tool: str) -> list[str]:
@@ -146,7 +150,7 @@ def _tool_summary(rows: list[dict[str, Any]], tool: str, n_boot: int,
     for kind in ("clean", "single", "pair", "triple"):
         s[f"exact_{kind}"] = _rate([bool(r.get(f"{tool}_exact")) for r in rows
                                     if r["kind"] == kind])
-    for gen in ("rigid", "contact"):
+    for gen in _GENERATORS:
         sub = [r for r in rows if r["generator"] == gen]
         s[f"false_positive_{gen}"] = _rate([bool(_found(r, tool)) for r in sub
                                             if not _truth(r)])
@@ -194,7 +198,7 @@ def summarise(rows: list[dict[str, Any]], n_boot: int = 400, seed: int = 0) -> d
         "records": len(rows), "scored": len(scored), "status": status,
         "clean_scored": sum(1 for r in scored if not _truth(r)),
         "by_generator": {g: sum(1 for r in scored if r["generator"] == g)
-                         for g in ("rigid", "contact")},
+                         for g in _GENERATORS},
         "by_kind": {k: sum(1 for r in scored if r["kind"] == k)
                     for k in ("clean", "single", "pair", "triple")},
         "by_writer": {w: sum(1 for r in scored if r["writer"] == w) for w in ("rig_log", "bag")},
@@ -232,20 +236,24 @@ def report_markdown(summary: dict[str, Any]) -> str:
     """The side-by-side tables of ``report.md`` (and the README's)."""
     b, p = summary["tools"]["bfr"], summary["tools"]["peer"]
     lines = [f"{summary['scored']} scored cases of {summary['records']} "
-             f"({summary['clean_scored']} clean; rigid {summary['by_generator']['rigid']}, "
-             f"contact {summary['by_generator']['contact']}; rig logs "
+             f"({summary['clean_scored']} clean; truth: rigid model "
+             f"{summary['by_generator']['rigid']}, contact model "
+             f"{summary['by_generator']['contact']}, node suite "
+             f"{summary['by_generator']['nodes']}; rig logs "
              f"{summary['by_writer']['rig_log']}, bags {summary['by_writer']['bag']}); "
              f"not scored: {summary['status']}.", "",
              "| figure | bfr diagnose | PySINDy peer |", "| --- | --- | --- |"]
     rows = [("false positives on clean cases", "false_positive"),
             ("... rigid truth", "false_positive_rigid"),
             ("... contact-model truth", "false_positive_contact"),
+            ("... node-suite truth (bags)", "false_positive_nodes"),
             ("exact set, all cases", "exact"), ("exact set, single effects", "exact_single"),
             ("pairs found as pairs (exact)", "exact_pair"),
             ("triples found as triples (exact)", "exact_triple"),
             ("pairs: both found", "pair_all_found"), ("triples: all found", "triple_all_found"),
             ("exact set, rigid truth", "exact_rigid"),
-            ("exact set, contact-model truth", "exact_contact")]
+            ("exact set, contact-model truth", "exact_contact"),
+            ("exact set, node-suite truth (bags)", "exact_nodes")]
     for label, key in rows:
         lines.append(f"| {label} | {_pct(b[key])} | {_pct(p[key])} |")
     lines.append(f"| effects named beside the truth, per effect case | "
