@@ -28,6 +28,10 @@ import time
 from pathlib import Path
 from typing import Any
 
+from bfr_diagnose.limits.plots import plot_all
+from bfr_diagnose.limits.runner import done_indices, run_cases
+from bfr_diagnose.limits.stats import load_records, summarise, write_report
+
 __all__ = ["main"]
 
 #: Single-threaded numerics in every worker: the cluster's processes are the parallelism.
@@ -69,8 +73,6 @@ def _parser(truths: tuple[str, ...] = ()) -> argparse.ArgumentParser:
 
 
 def _run(args: argparse.Namespace, recorders: dict[str, Any]) -> int:
-    from bfr_diagnose.limits.runner import done_indices, run_cases  # noqa: PLC0415 - dask only when running
-
     if args.cases < 1 or args.first < 0 or args.workers < 1:
         return _error("need --cases >= 1, --first >= 0 and --workers >= 1")
     if not 8.0 <= args.duration <= 60.0:
@@ -116,8 +118,6 @@ def _run(args: argparse.Namespace, recorders: dict[str, Any]) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from bfr_diagnose.limits.stats import load_records, summarise, write_report  # noqa: PLC0415 - keeps `run` light
-
     out = Path(args.out)
     runs = [out, *map(Path, args.also)]
     for run in runs:
@@ -127,7 +127,9 @@ def _report(args: argparse.Namespace) -> int:
     if not rows:
         return _error(f"{out}/cases holds no records")
     summary: dict[str, Any] = summarise(rows, n_boot=args.bootstrap, seed=0)
-    files = write_report(out, rows, summary, plots=not args.no_plots)
+    figs = [] if args.no_plots else plot_all(out, [r for r in rows if r.get("status") == "ok"],
+                                             summary)
+    files = [*write_report(out, rows, summary, figs), *figs]
     if args.json:
         print(json.dumps(summary, default=float))
     else:

@@ -307,17 +307,12 @@ def write_table(out: Path, rows: list[dict[str, Any]]) -> list[Path]:
 
 
 def write_report(out: Path, rows: list[dict[str, Any]], summary: dict[str, Any],
-                 plots: bool = True) -> list[Path]:
-    """table.parquet/.csv, summary.json, report.md and the figures; the files written."""
+                 figs: list[Path] | None = None) -> list[Path]:
+    """table.parquet/.csv, summary.json and report.md (showing ``figs``); the files written."""
     files = write_table(out, rows)
     (out / "summary.json").write_text(json.dumps(summary, indent=1, default=float))
     files.append(out / "summary.json")
-    figs: list[Path] = []
-    if plots:
-        from bfr_diagnose.limits.plots import plot_all  # noqa: PLC0415 - matplotlib for plots
-
-        figs = plot_all(out, rows, summary)
-        files += figs
+    figs = list(figs or [])
     md = ["# Detection limits: bfr diagnose beside PySINDy", "", report_markdown(summary), ""]
     md += [f"![{f.stem}]({f.name})" for f in figs]
     (out / "report.md").write_text("\n".join(md) + "\n")
