@@ -373,6 +373,15 @@ def _notes(suspects: dict[str, str], results: list[PartResult],
     return out + notes
 
 
+def _bound_notes(sel: Selection) -> list[str]:
+    """A note for every sensor value that ran to its bound (not identified there)."""
+    return [f"{r['recording']}: the sensor model's {r['name']} ({r['description']}) ran to its "
+            f"bound {r['at_bound']:g} {r['unit']}: not identified by this recording (either "
+            "the recording does not show it, e.g. a timing at constant speed, or it stands in "
+            "for something the model lacks; then read the physics fitted beside it with "
+            "care)." for r in sel.sensor_table if r.get("at_bound") is not None]
+
+
 # -- per recording ---------------------------------------------------------------------------
 
 
@@ -496,7 +505,7 @@ def _summary(*, recordings: list[tuple[str, list[Recording]]], results: list[Par
         "has_ball": any(pr.prep.has_ball for pr in results),
         "frame_held": any(pr.kind == "frame held" for pr in results),
         "verdict": _verdict(sel.chosen, suspects, significant_loc),
-        "notes": _notes(suspects, results, recordings, notes),
+        "notes": _notes(suspects, results, recordings, notes) + _bound_notes(sel),
         "effects": [n for n in sel.chosen if n not in suspects],
         "effects_selected": sel.chosen,
         "suspects": suspects,

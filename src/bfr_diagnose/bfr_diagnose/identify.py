@@ -1128,7 +1128,11 @@ def parameter_table(fit: Fit, tau: float) -> list[dict[str, Any]]:
 
 
 def sensor_table(prob: Problem, fit: Fit, tau: float) -> list[dict[str, Any]]:
-    """Each part's fitted sensor model with 95 % intervals."""
+    """Each part's fitted sensor model with 95 % intervals.
+
+    ``at_bound`` is the bound a value ran to (within 0.1 % of its range), else None: such a
+    value is not identified by the recording (:func:`bfr_diagnose.api` notes it).
+    """
     out = []
     j = fit.n_params
     for p, vals in zip(prob.parts, fit.sensors, strict=True):
@@ -1137,9 +1141,12 @@ def sensor_table(prob: Problem, fit: Fit, tau: float) -> list[dict[str, Any]]:
                    else float("nan"))
             sd = math.sqrt(var) if var >= 0 else float("nan")
             sp = sensor_param(name)
+            margin = 1e-3 * (sp.upper - sp.lower)
+            bound = (sp.lower if v - sp.lower <= margin else
+                     sp.upper if sp.upper - v <= margin else None)
             out.append({"recording": p.name, "name": name, "unit": sp.unit, "value": float(v),
                         "ci95": [float(v - 1.96 * sd), float(v + 1.96 * sd)], "std": sd,
-                        "description": sp.description})
+                        "description": sp.description, "at_bound": bound})
             j += 1
     return out
 

@@ -25,6 +25,7 @@ from bfr_model.params import params_to_ros_yaml
 
 from bfr_diagnose.api import Diagnosis, PartResult
 from bfr_diagnose.effects import DESTINATION, EFFECTS, display_values
+from bfr_diagnose.synth import SynthConfig, stabilised_recording
 
 __all__ = ["corrected_yaml", "format_text", "phi_dot_profiles", "sensor_yaml",
            "write_outputs"]
@@ -195,6 +196,8 @@ def _md_sensors(d: Diagnosis) -> list[str]:
     for r in s["sensor_timing"]:
         add = lat0 if r["name"] == "latency" else 0.0
         name = "camera latency (total)" if r["name"] == "latency" else r["description"]
+        if r.get("at_bound") is not None:
+            name += " (**at its bound: not identified**)"
         L.append(f"| {Path(r['recording']).name} | {name} | {r['value'] + add:.4g} | "
                  f"{_num(r['ci95'][0] + add)} .. {_num(r['ci95'][1] + add)} | {r['unit']} |")
     for pr in d.parts:
@@ -486,8 +489,6 @@ def phi_dot_profiles(d: Diagnosis, pr: PartResult, duration: float = 15.0,
     against the nominal plant and against the corrected plant (:attr:`Diagnosis.corrected`:
     the plausible effects), started on the controller's orbit; the first 3 s are dropped.
     """
-    from bfr_diagnose.synth import SynthConfig, stabilised_recording  # noqa: PLC0415 - lazy: plots only
-
     edges = np.linspace(0.0, np.pi, n_bins + 1)
     centres = 0.5 * (edges[1:] + edges[:-1])
 
