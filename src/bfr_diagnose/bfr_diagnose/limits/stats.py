@@ -191,7 +191,9 @@ def summarise(rows: list[dict[str, Any]], n_boot: int = 400, seed: int = 0) -> d
     scored = [r for r in rows if r.get("status") == "ok"]
     status: dict[str, int] = {}
     for r in rows:
-        key = str(r.get("status", "?")).split(":")[0]
+        key = str(r.get("status", "?"))
+        if key.startswith(("simulation failed", "diagnosis failed")):
+            key = key.split(":", 1)[0]
         status[key] = status.get(key, 0) + 1
     rng = np.random.default_rng(seed)
     out: dict[str, Any] = {
@@ -241,7 +243,8 @@ def report_markdown(summary: dict[str, Any]) -> str:
              f"{summary['by_generator']['contact']}, node suite "
              f"{summary['by_generator']['nodes']}; rig logs "
              f"{summary['by_writer']['rig_log']}, bags {summary['by_writer']['bag']}); "
-             f"not scored: {summary['status']}.", "",
+             "not scored: " + (", ".join(f"{v} {k}" for k, v in summary["status"].items()
+                                          if k != "ok") or "none") + ".", "",
              "| figure | bfr diagnose | PySINDy peer |", "| --- | --- | --- |"]
     rows = [("false positives on clean cases", "false_positive"),
             ("... rigid truth", "false_positive_rigid"),
