@@ -44,6 +44,11 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
         "main",
         "prove bfr diagnose on recordings with hidden effects (confusion matrix, accuracy)",
     ),
+    "limits": (
+        "bfr_tools.limits",
+        "main",
+        "detection limits: randomized blind test on Dask beside PySINDy (run, report)",
+    ),
     "rig": (
         "bfr_tools.rig",
         "main",
