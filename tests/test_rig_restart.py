@@ -66,9 +66,10 @@ def test_kill_and_restart_the_controller(ros_harness: rosutil.RosHarness,
     new = states[n0:]
     assert all(abs(s.torque) <= 0.1 for s in new)
     assert all(s.torque == 0.0 for s in new if s.mode != ControllerState.ROLLING)
-    out2 = ctl2.output()
-    assert "ROLLING at t = " in out2 or "BALL_LOST: ball seen but off the orbit" in out2 \
-        or "BALL_LOST at t = " in out2
+    # ... and says so in its log (the state message may arrive before the log line is out)
+    said = ("ROLLING at t = ", "BALL_LOST: ball seen but off the orbit", "BALL_LOST at t = ")
+    assert h.spin_until(lambda: any(m in ctl2.output() for m in said), timeout=30), \
+        ctl2.output()[-3000:]
     assert h.spin_until(lambda: "controller is back: lock-step resumed" in sim.output(),
                         timeout=30)
     assert ctl2.alive and sim.alive
