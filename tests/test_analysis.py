@@ -137,6 +137,14 @@ def test_cli_energy_json_and_rough(tmp_path, capsys) -> None:  # noqa: ANN001
     f = tmp_path / "rough.yaml"
     assert main(["rough", "--count", "12", "--seed", "3", "--out", str(f)]) == 0
     assert len(load_params(f).track.asperity_phi) == 12
+    # an existing parameter file is refused in one line and kept; --force replaces it
+    capsys.readouterr()
+    assert main(["rough", "--count", "5", "--seed", "3", "--out", str(f)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--force" in err, err
+    assert len(load_params(f).track.asperity_phi) == 12
+    assert main(["rough", "--count", "5", "--seed", "3", "--out", str(f), "--force"]) == 0
+    assert len(load_params(f).track.asperity_phi) == 5
 
 
 # -- bumps on both edges (seed recommendation 3) -------------------------------------------

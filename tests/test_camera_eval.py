@@ -36,12 +36,23 @@ def test_json_has_every_figure_with_its_target(capsys: pytest.CaptureFixture[str
 
 
 def test_table_and_example_images(tmp_path, capsys: pytest.CaptureFixture[str]) -> None:  # noqa: ANN001
-    assert evaluate.main(["--frames", "2", "--repeat", "1", "--conditions", "occluded",
-                          "--out-dir", str(tmp_path)]) == 0
+    out_dir = tmp_path / "examples"
+    args = ["--frames", "2", "--repeat", "1", "--conditions", "occluded", "--out-dir",
+            str(out_dir)]
+    assert evaluate.main(args) == 0
     out = capsys.readouterr().out
     assert "position error, median" in out and "detect time with ROI, median" in out
-    assert (tmp_path / "occluded.png").is_file()
-    assert (tmp_path / "occluded_annotated.png").is_file()
+    assert (out_dir / "occluded.png").is_file()
+    assert (out_dir / "occluded_annotated.png").is_file()
+    # an existing folder is refused in one line and left as it was; --force replaces it
+    (out_dir / "mine.txt").write_text("keep")
+    assert evaluate.main(args) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "--force" in err, err
+    assert (out_dir / "mine.txt").read_text() == "keep"
+    assert evaluate.main([*args, "--force"]) == 0
+    assert not (out_dir / "mine.txt").exists() and (out_dir / "occluded.png").is_file()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries
 
 
 def test_usage_errors() -> None:

@@ -29,6 +29,7 @@ this machine, single-threaded. It joins the renderer (``bfr_sim.render``) and th
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import sys
@@ -49,6 +50,7 @@ from bfr_camera.detector import (
     DetectorConfig,
     load_detector_config,
 )
+from bfr_model.io.output import OutputError, atomic_dir
 from bfr_model.params import load_params
 from bfr_sim.render import (
     FrameRenderer,
@@ -446,7 +448,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     p.add_argument("--json", action="store_true", help="print the results as JSON")
     p.add_argument("--out-dir", type=Path, default=None, metavar="DIR",
-                   help="save an example frame per condition as PNG (raw and annotated)")
+                   help="save an example frame per condition as PNG (raw and annotated); "
+                        "written whole or not at all")
+    p.add_argument("--force", action="store_true",
+                   help="replace an existing --out-dir (else refused, exit 2)")
     p.add_argument("--camera", default=None, metavar="YAML",
                    help="camera parameter file (default: the shipped config/camera.yaml)")
     p.add_argument("--params", default=None, metavar="YAML",
@@ -467,9 +472,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     unknown = [c for c in conds if c not in CONDITIONS]
     if unknown:
         p.error(f"unknown condition(s) {unknown}; choose from {', '.join(CONDITIONS)}")
-    res = evaluate(frames=args.frames, seed=args.seed, params_path=args.params,
-                   camera_path=args.camera, out_dir=args.out_dir, conditions=conds,
-                   repeat=args.repeat)
+    try:
+        with contextlib.ExitStack() as stack:
+            out_dir = (None if args.out_dir is None
+                       else stack.enter_context(atomic_dir(args.out_dir, args.force)))
+            res = evaluate(frames=args.frames, seed=args.seed, params_path=args.params,
+                           camera_path=args.camera, out_dir=out_dir, conditions=conds,
+                           repeat=args.repeat)
+    except (OutputError, OSError) as exc:
+        print(f"bfr camera-eval: error: {exc}", file=sys.stderr)
+        return 2
     if args.json:
         sys.stdout.write(json.dumps(res, indent=2) + "\n")
     else:

@@ -37,6 +37,7 @@ from typing import Any
 import numpy as np
 from bfr_diagnose.cli import main as diagnose_main
 from bfr_model.io import account_line, read_recording
+from bfr_model.io.output import atomic_file
 from bfr_model.params import ParameterError, load_params
 from bfr_model.perturbations import load_study, rough_track, with_asperities, write_params
 
@@ -152,6 +153,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--width", type=float, nargs=2, default=(5e-5, 2e-4),
                    metavar=("MIN", "MAX"), help="asperity widths along the contour [m]")
     r.add_argument("--out", type=Path, required=True, help="parameter file to write")
+    r.add_argument("--force", action="store_true",
+                   help="replace an existing --out file (else refused, exit 2)")
     return p
 
 
@@ -570,8 +573,9 @@ def _rough(args: argparse.Namespace) -> int:
     ph, h, w = rough_track(params, rng, args.count, tuple(args.phi_range), tuple(args.height),
                            tuple(args.width))
     p = with_asperities(params, ph, h, w)
-    write_params(p, args.out, header=f"rough track: {args.count} asperities, seed {args.seed}"
-                                     f" (bfr analyze rough)")
+    with atomic_file(args.out, args.force) as tmp:
+        write_params(p, tmp, header=f"rough track: {args.count} asperities, seed {args.seed}"
+                                    f" (bfr analyze rough)")
     print(f"wrote {args.out}: {args.count} asperities (track.asperity_*), heights "
           f"{h.min() if h.size else 0:.3g}..{h.max() if h.size else 0:.3g} m")
     return 0
