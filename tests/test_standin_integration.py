@@ -203,6 +203,7 @@ def test_camera_killed_and_restarted_mid_run(ros_harness: rosutil.RosHarness,
     cam.process.send_signal(signal.SIGKILL)
     cam.process.wait(timeout=10)
     t_kill = sim_t()
+    h.spin_for(0.3)  # take what the camera sent before it died (in flight at the kill)
     n_obs = len(watch.obs)
     lost_timeout = load_controller_config().supervisor.lost_timeout
     assert h.spin_until(lambda: sim_t() > t_kill + 0.6, timeout=60)
