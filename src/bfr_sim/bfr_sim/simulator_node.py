@@ -321,6 +321,9 @@ class SimulatorNode(Node):
         self.wait_info_subscribers = int(st["wait_info_subscribers"])
         self.wait_truth_subscribers = int(st["wait_truth_subscribers"])
         self.wait_controller = bool(st["wait_controller"])
+        self.wait_obs_subscribers = int(st["wait_observation_subscribers"])
+        self.start_settle = float(st["settle"])
+        nonnegative("start.settle", self.start_settle)
         self.start_timeout = float(st["timeout"])
         info = self.camera.to_camera_info()
         self.info_msg = CameraInfo()
@@ -342,6 +345,7 @@ class SimulatorNode(Node):
         # controller_state is read in lock-step only (the answer to a frame); the start waits
         # for a controller in either mode through the graph
         self.state_topic = self.resolve_topic_name("controller_state")
+        self.obs_topic = self.resolve_topic_name("ball_observation")
         self.state_sub = (self.create_subscription(
             ControllerState, "controller_state", self._on_state, STATE_QOS)
             if self.mode == "lockstep" else None)
@@ -544,7 +548,8 @@ class SimulatorNode(Node):
         need_ctrl = self.wait_controller
         waits = [(self.js_pub, self.wait_subscribers), (self.info_pub, self.wait_info_subscribers),
                  (self.truth_pub, self.wait_truth_subscribers)]
-        if all(n <= 0 for _, n in waits) and not need_ctrl:
+        n_obs = self.wait_obs_subscribers
+        if all(n <= 0 for _, n in waits) and not need_ctrl and n_obs <= 0:
             return
         ex = self.executor_ref
         deadline = time.monotonic() + self.start_timeout
@@ -552,11 +557,15 @@ class SimulatorNode(Node):
             "waiting for " + ", ".join(f"{n} subscriber(s) of {pub.topic_name}"
                                        for pub, n in waits if n > 0)
             + (f" and a controller ({self.state_topic})" if need_ctrl else "")
+            + (f", a publisher and {n_obs} subscriber(s) of {self.obs_topic}" if n_obs > 0
+               else "")
             + " before starting")
 
         def ready() -> bool:
             return (all(pub.get_subscription_count() >= n for pub, n in waits)
-                    and (not need_ctrl or self.count_publishers(self.state_topic) > 0))
+                    and (not need_ctrl or self.count_publishers(self.state_topic) > 0)
+                    and (n_obs <= 0 or (self.count_publishers(self.obs_topic) > 0
+                                        and self.count_subscribers(self.obs_topic) >= n_obs)))
 
         while not stop and not ready():
             if time.monotonic() > deadline:
@@ -564,12 +573,16 @@ class SimulatorNode(Node):
                     f"start: peers missing after {self.start_timeout:g} s ("
                     + ", ".join(f"{pub.get_subscription_count()} subscriber(s) of "
                                 f"{pub.topic_name}" for pub, _ in waits)
-                    + f", {self.count_publishers(self.state_topic)} controller(s)); starting "
+                    + f", {self.count_publishers(self.state_topic)} controller(s), "
+                      f"{self.count_publishers(self.obs_topic)} / "
+                      f"{self.count_subscribers(self.obs_topic)} publisher(s) / subscriber(s) "
+                      f"of {self.obs_topic}); starting "
                       f"anyway")
                 return
             ex.spin_once(timeout_sec=0.05)
-        # let the remaining endpoints of the same participants match
-        settle = time.monotonic() + 0.5
+        # let the remaining endpoints of the participants match one another (the simulator
+        # sees the graph, not whether the recorder has matched the controller's publishers)
+        settle = time.monotonic() + self.start_settle
         while not stop and time.monotonic() < settle:
             ex.spin_once(timeout_sec=0.05)
 

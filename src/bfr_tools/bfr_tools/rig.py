@@ -521,7 +521,9 @@ def _node_args(args: argparse.Namespace, log_dir: Path, bag: Path | None,
                          "-p", f"start.wait_subscribers:={2 + rec}",
                          "-p", f"start.wait_info_subscribers:={1 + rec}",
                          "-p", f"start.wait_truth_subscribers:={rec}",
-                         "-p", "start.wait_controller:=true"]
+                         "-p", "start.wait_controller:=true",
+                         "-p", f"start.wait_observation_subscribers:={1 + rec}",
+                         "-p", f"start.settle:={2.0 if rec else 0.5}"]
     per["simulator"] += [a for k, v in start.items() for a in ("-p", f"{k}:={v!r}")]
     per["controller"] += ["-p", "loop.trigger:=observation"]
     # wall-clock watchdogs: in lock-step a gap only means a slow machine, and this command

@@ -72,7 +72,9 @@ def _nodes(context: Any) -> list[Any]:
                         {"sim.mode": arg("mode"), "start.wait_subscribers": 2 + rec,
                          "start.wait_info_subscribers": 1 + rec,
                          "start.wait_truth_subscribers": rec,
-                         "start.wait_controller": True, **start}]))
+                         "start.wait_controller": True,
+                         "start.wait_observation_subscribers": 1 + rec,
+                         "start.settle": 2.0 if rec else 0.5, **start}]))
         sim_time = {"use_sim_time": True}
         nodes.append(Node(
             package="bfr_camera", executable="camera_node", name="camera", output="screen",
