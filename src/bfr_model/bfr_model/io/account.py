@@ -62,7 +62,7 @@ Pure numpy; no ``rclpy``.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -363,6 +363,39 @@ class GateResult:
             out.append(f"ball_off_frame: ball fix excluded, first at "
                        f"{where(self.first['ball_off_frame'])}")
         return out
+
+    def account(self, *, source: str, kind: str, t: NDArray[np.float64],
+                lines: Sequence[int] | NDArray[np.int64], lost: Mapping[str, Sequence[int]],
+                unit: str) -> ReadAccount:
+        """The read's account: the gates' drops plus what the parser skipped before them.
+
+        Parameters
+        ----------
+        source, kind : str
+            As in :class:`ReadAccount`.
+        t : ndarray
+            Stamps of the samples the gates saw [s].
+        lines : sequence of int
+            Line number of each of those samples (where drops are reported).
+        lost : mapping of str to sequence of int
+            Lines skipped by the parser before the gates, by cause (their line numbers).
+        unit : str
+            What a skipped line is called in the actions ("line", "row").
+        """
+        dropped = dict(self.dropped)
+        for cause, where in lost.items():
+            dropped[cause] = dropped.get(cause, 0) + len(where)
+        actions = self.actions(lambda i: f"line {lines[i]}")
+        actions += [f"{cause}: {len(where)} {unit}(s) skipped, first at line {where[0]}"
+                    for cause, where in lost.items()]
+        return ReadAccount(
+            source=source, kind=kind,
+            samples_present=len(lines) + sum(len(w) for w in lost.values()),
+            samples_used=int(self.keep.sum()),
+            seconds_present=covered_seconds(t[np.isfinite(t)]),
+            seconds_used=covered_seconds(t[self.keep]),
+            dropped=dropped, degraded={"ball_off_frame": int(self.ball_off.sum())},
+            actions=actions)
 
 
 def _first_of(mask: NDArray[np.bool_], index: NDArray[np.intp]) -> int | None:

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
+from bfr_model.io.account import Gates, ReadAccount, gate_samples
 from bfr_model.recording import OPTIONAL_FIELDS, Recording, RecordingError, ball_centre_angle
 
 __all__ = ["CSV_COLUMNS", "CsvFormatError", "read_csv", "write_csv"]
@@ -350,21 +350,8 @@ def _gated(p: Path, table: _CsvTable, col: dict[str, np.ndarray],
     g = gate_samples(col["t"], col["theta"], col["theta_dot"], col["torque"], col["ball_x"],
                      col["ball_y"], rates=(col["phi_dot"],), gates=gates)
     lines = table.row_lines
-    dropped = dict(g.dropped)
-    for cause, where in table.lost.items():
-        dropped[cause] = dropped.get(cause, 0) + len(where)
-    actions = g.actions(lambda i: f"line {lines[i]}")
-    actions += [f"{cause}: {len(where)} row(s) skipped, first at line {where[0]}"
-                for cause, where in table.lost.items()]
-    t_all = col["t"][np.isfinite(col["t"])]
-    kept = col["t"][g.keep]
-    account = ReadAccount(
-        source=str(p), kind="csv",
-        samples_present=len(lines) + sum(len(w) for w in table.lost.values()),
-        samples_used=int(g.keep.sum()),
-        seconds_present=covered_seconds(t_all),
-        seconds_used=covered_seconds(kept),
-        dropped=dropped, degraded={"ball_off_frame": int(g.ball_off.sum())}, actions=actions)
+    account = g.account(source=str(p), kind="csv", t=col["t"], lines=lines, lost=table.lost,
+                        unit="row")
     if not g.keep.any():
         raise CsvFormatError(f"{p}: no row passed the checks: {account.line()}")
     out = {k: v[g.keep] for k, v in col.items()}

@@ -68,7 +68,7 @@ from typing import Any, BinaryIO
 import numpy as np
 from numpy.typing import NDArray
 
-from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
+from bfr_model.io.account import Gates, ReadAccount, gate_samples
 from bfr_model.io.timing import camera_backlog_end, line_rate, velocity_lag
 from bfr_model.recording import Recording
 
@@ -511,20 +511,8 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
                           f"duplicate(s) in this run")
     keep = g.keep
     events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in raw.events]
-    dropped = dict(g.dropped)
-    for cause, where in raw.lost.items():
-        dropped[cause] = dropped.get(cause, 0) + len(where)
-    actions = g.actions(lambda i: f"line {lines[i]}")
-    actions += [f"{cause}: {len(where)} line(s) skipped, first at line {where[0]}"
-                for cause, where in raw.lost.items()]
-    t_all = col["t"][np.isfinite(col["t"])]
-    kept_t = col["t"][keep]
-    account = ReadAccount(
-        source=source, kind="rig_log", samples_present=len(raw) + sum(
-            len(w) for w in raw.lost.values()), samples_used=int(keep.sum()),
-        seconds_present=covered_seconds(t_all),
-        seconds_used=covered_seconds(kept_t),
-        dropped=dropped, degraded={"ball_off_frame": int(g.ball_off.sum())}, actions=actions)
+    account = g.account(source=source, kind="rig_log", t=col["t"], lines=lines,
+                        lost=raw.lost, unit="line")
     return RigRun(data=data[keep], lines=lines[keep], events=events,
                   dropped_duplicates=int(g.dropped.get("duplicate", 0)),
                   ball_off=g.ball_off[keep], account=account)
