@@ -109,3 +109,34 @@ def test_missing_parameter_file_is_a_clear_error(tmp_path) -> None:  # noqa: ANN
 def test_rolling_radius_formula() -> None:
     b = NOMINAL.ball
     assert b.rolling_radius == pytest.approx(math.sqrt(0.0166**2 - 0.0255**2 / 4))
+
+
+def test_speed_floor_is_a_lower_bound_that_finds_every_cusp() -> None:
+    """The cheap check (params.check_rigid) against the dense grid on random curves.
+
+    Curves near and past a cusp: random harmonics up to k = 8 and bumps whose sharpness
+    ranges across the rolling radius. The floor never exceeds the minimum on a grid 64 times
+    finer than its own (it is either a bound or the 8192-node grid's minimum, the check it
+    replaced) and says "cusp" exactly when that 8192-node check does.
+    """
+    rng = np.random.default_rng(7)
+    base = OffsetCurve.from_params(NOMINAL).arrays
+    agree = 0
+    for _ in range(300):
+        k = rng.integers(0, 4)
+        nb = rng.integers(0, 3)
+        w = np.exp(rng.uniform(np.log(0.005), np.log(0.3), nb))
+        h = rng.uniform(0.0, 1.5, nb) * w * w / base.rolling_radius  # around the cusp limit
+        arrays = type(base)(
+            rho0=base.rho0, orders=np.concatenate([base.orders, rng.integers(1, 9, k)]),
+            ccos=np.concatenate([base.ccos, rng.normal(0.0, 3e-3, k)]),
+            csin=np.concatenate([base.csin, rng.normal(0.0, 3e-3, k)]),
+            bump_phi=rng.uniform(0.0, 2.0 * np.pi, nb), bump_h=h, bump_w=w,
+            rolling_radius=base.rolling_radius)
+        c = OffsetCurve(arrays)
+        floor, dense, fine = c.speed_floor(), c.min_speed(), c.min_speed(1 << 16)
+        assert floor <= dense + 1e-15
+        assert floor <= fine or floor == dense
+        assert (floor > 0.0) == (dense > 0.0), (floor, dense, w, h)
+        agree += 1
+    assert agree == 300

@@ -425,13 +425,13 @@ class RigParams:
                t.bump_height, t.bump_width, self.ball.rolling_radius)
         lam_min = _RIGID_CHECKS.get(key)
         if lam_min is None:  # the same curve is checked once (fits change other entries)
-            lam_min = OffsetCurve.from_params(self).min_speed()
+            lam_min = OffsetCurve.from_params(self).speed_floor()
             if len(_RIGID_CHECKS) > 1024:
                 _RIGID_CHECKS.clear()
             _RIGID_CHECKS[key] = lam_min
         check(lam_min > 0.0, "frame.contour / track.bump_*",
                "the ball-centre curve has a cusp (a concave part of the track is sharper "
-               f"than the rolling radius R = {self.ball.rolling_radius:.4g} m; min |p'| = "
+               f"than the rolling radius R = {self.ball.rolling_radius:.4g} m; |p'| down to "
                f"{lam_min:.3g} m/rad): widen the bumps or use the contact model")
 
     @property
