@@ -80,6 +80,32 @@ def test_score_counts_what_the_table_says() -> None:
     assert not bt.targets_met(sc)
 
 
+def test_exact_up_to_confounds_lets_only_a_reported_pair_stand_in() -> None:
+    pair = [["plate_distance", "ball_inertia"]]
+    # the report said it cannot tell these two apart: the found one stands for the concealed
+    assert bt.exact_up_to_confounds(["ball_inertia"], ["plate_distance"], pair)
+    assert bt.exact_up_to_confounds(["ball_inertia", "joint_coulomb_friction"],
+                                    ["joint_coulomb_friction", "plate_distance"], pair)
+    # no reported pair, another pair, an extra effect, or both found: not exact
+    assert not bt.exact_up_to_confounds(["ball_inertia"], ["plate_distance"], [])
+    assert not bt.exact_up_to_confounds(["ball_inertia"], ["plate_distance"],
+                                        [["plate_distance", "ball_mass"]])
+    assert not bt.exact_up_to_confounds(["ball_inertia"], ["plate_distance", "ball_mass"],
+                                        pair)
+    assert not bt.exact_up_to_confounds(["ball_inertia"], ["ball_inertia", "plate_distance"],
+                                        pair)
+    # a clean case with a confounded pair found is a false positive either way
+    assert not bt.exact_up_to_confounds([], ["plate_distance"], pair)
+    # one stand-in per concealed effect
+    assert not bt.exact_up_to_confounds(["ball_inertia"], ["plate_distance", "ball_mass"],
+                                        [*pair, ["ball_mass", "ball_inertia"]])
+    res = [{**_result("single", ["ball_inertia"], ["plate_distance"]),
+            "exact_up_to_confounds": True},
+           _result("single", ["ball_mass"], ["ball_mass"])]
+    sc = bt.score(res)
+    assert sc["exact"] == 1 and sc["exact_up_to_confounds"] == 2
+
+
 def test_parameter_error_of_vector_effects() -> None:
     base = load_params()
     err = bt._param_error("frame_imbalance", [3e-4, 4e-4], {"M_x": 3e-4, "M_y": 4.5e-4}, base)
