@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 from bfr_diagnose.api import DiagnoseOptions, diagnose_recording, diagnose_recordings
 from bfr_diagnose.effects import EFFECT_NAMES
+from bfr_diagnose.identify import Fit, _corr_matrix
 from bfr_diagnose.synth import (
     LogConventions,
     SynthConfig,
@@ -92,6 +93,21 @@ def test_effect_recovered(name: str) -> None:
                and p["name"] == pname)
     assert abs(est - true) / abs(true - nominal) < 0.25, (name, est, true)
     assert max(s["metrics"]["improvement_per_signal"].values()) > 1.5
+
+
+def test_correlations_of_an_unconstrained_parameter_are_not_reported() -> None:
+    """A parameter at the pseudo-inverse's zero variance has no correlation (was 1e130)."""
+    a = np.array([[1.0, 0.5, 0.2], [0.5, 2.0, -0.3], [0.2, -0.3, 1.5]])
+    cov = np.zeros((4, 4))
+    cov[:3, :3] = a
+    cov[3, 3] = 1e-40   # a timing at constant speed: its column vanished
+    cov[3, :3] = cov[:3, 3] = [1e-18, -2e-18, 1e-19]  # numerical residue of pinv
+    c = _corr_matrix(Fit(effects=[], values=[], sensors=[], cost_train=0.0, cost_test=0.0,
+                         cov=cov))
+    d = np.sqrt(np.diag(a))
+    np.testing.assert_allclose(c[:3, :3], a / np.outer(d, d), rtol=1e-12)
+    np.testing.assert_array_equal(c[3], [0.0, 0.0, 0.0, 1.0])
+    assert np.all(np.abs(c) <= 1.0)
 
 
 def test_clean_control_with_a_strange_logger_through_rig_log_text(tmp_path: Path) -> None:

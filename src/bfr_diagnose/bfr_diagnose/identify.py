@@ -993,10 +993,32 @@ def _add_confound(out: list[dict[str, Any]], stage: int, effects: list[str], kin
 
 
 def _corr_matrix(fit: Fit) -> FloatArray | None:
+    """Correlations of the fitted parameters; 0 for a parameter the data do not constrain.
+
+    A parameter whose Jacobian column vanishes (a timing at constant speed, a value at its
+    bound) has a variance at the pseudo-inverse's numerical zero: dividing by it gave
+    "correlations" of 1e130 on the shipped logs. A valid covariance has ``|rho| <= 1``; a
+    parameter with zero variance or a larger ratio has no correlation to report (its row
+    and column are 0, its diagonal 1).
+    """
     if fit.cov is None:
         return None
-    d = np.sqrt(np.maximum(np.diag(fit.cov), 1e-300))
-    return fit.cov / np.outer(d, d)
+    var = np.diag(fit.cov)
+    d = np.sqrt(np.maximum(var, 1e-300))
+    corr = fit.cov / np.outer(d, d)
+    corr[var <= 0.0, :] = 0.0
+    corr[:, var <= 0.0] = 0.0
+    corr[~np.isfinite(corr)] = 2.0
+    np.fill_diagonal(corr, 1.0)
+    while True:  # the parameter in most impossible pairs first (its variance is the zero)
+        count = np.sum(np.abs(corr) > 1.0 + 1e-6, axis=1)
+        if not count.any():
+            break
+        worst = int(np.lexsort((var, -count))[0])
+        corr[worst, :] = 0.0
+        corr[:, worst] = 0.0
+        corr[worst, worst] = 1.0
+    return np.clip(corr, -1.0, 1.0)
 
 
 def _offsets(fit: Fit) -> FloatArray:
