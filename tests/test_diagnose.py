@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 from bfr_diagnose.api import DiagnoseOptions, diagnose_recording, diagnose_recordings
 from bfr_diagnose.effects import EFFECT_NAMES
-from bfr_diagnose.identify import Fit, _corr_matrix
+from bfr_diagnose.identify import Fit, _corr_matrix, _covariance
 from bfr_diagnose.synth import (
     LogConventions,
     SynthConfig,
@@ -108,6 +108,22 @@ def test_correlations_of_an_unconstrained_parameter_are_not_reported() -> None:
     np.testing.assert_allclose(c[:3, :3], a / np.outer(d, d), rtol=1e-12)
     np.testing.assert_array_equal(c[3], [0.0, 0.0, 0.0, 1.0])
     assert np.all(np.abs(c) <= 1.0)
+
+
+def test_a_parameter_the_data_do_not_fix_has_infinite_variance() -> None:
+    """Two collinear columns (a frame off-centre and a camera offset on a held frame)."""
+    rng = np.random.default_rng(3)
+    a, b = rng.normal(size=200), rng.normal(size=200)
+    jac = np.column_stack([a, b, 2.0 * b, np.zeros(200)])  # 1 and 2 collinear, 3 unused
+    cov = _covariance(jac, 0.01, np.ones(4))
+    # parameter 0 is fixed as in the regression on a and b alone (2b adds no direction)
+    ab = np.column_stack([a, b])
+    assert cov[0, 0] == pytest.approx(0.01 * np.linalg.inv(ab.T @ ab)[0, 0], rel=1e-9)
+    assert np.all(np.isinf(np.diag(cov)[1:]))
+    assert np.all(cov[0, 1:] == 0.0)
+    c = _corr_matrix(Fit(effects=[], values=[], sensors=[], cost_train=0.0, cost_test=0.0,
+                         cov=cov))
+    np.testing.assert_array_equal(c, np.eye(4))
 
 
 def test_clean_control_with_a_strange_logger_through_rig_log_text(tmp_path: Path) -> None:

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 import warnings
@@ -37,7 +36,7 @@ from bfr_diagnose import DiagnoseError
 from bfr_diagnose.api import DiagnoseOptions, diagnose_recordings
 from bfr_diagnose.effects import EFFECT_NAMES
 from bfr_diagnose.preprocess import PrepConfig
-from bfr_diagnose.report import format_text, write_outputs
+from bfr_diagnose.report import format_text, json_text, write_outputs
 
 __all__ = ["build_parser", "main"]
 
@@ -169,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     # diagnosis.json above keeps the diagnosis's
     d = dataclasses.replace(d, wall_time_s=time.perf_counter() - t0)
     if args.json:
-        print(json.dumps(d.to_json(), default=str))
+        print(json_text(d))
     else:
         print(format_text(d.to_json()))
     return 0

@@ -480,7 +480,7 @@ class Problem:
         n = jac.shape[0]
         s2 = 2.0 * sol.cost / max(n - x0.size, 1)
         try:
-            cov = np.linalg.pinv(jac.T @ jac) * s2 * np.outer(scales, scales)
+            cov = _covariance(jac, s2, scales)
         except (np.linalg.LinAlgError, ValueError):
             cov = None
         return Fit(effects=[e.name for e, _ in chosen], values=[v for _, v in chosen],
@@ -493,6 +493,26 @@ class Problem:
         sl = self.part_slice(i)
         return (float(np.nansum(w[self.train[sl]] ** 2)),
                 float(np.nansum(w[self.test[sl]] ** 2)), w)
+
+
+def _covariance(jac: FloatArray, s2: float, scales: FloatArray) -> FloatArray:
+    """``s^2 (J^T J)^+`` in natural units; infinite variance where the data fix nothing.
+
+    The pseudo-inverse gives a direction of ``J``'s null space zero variance, i.e. it would
+    call a parameter the recording does not constrain (a camera offset and the frame's
+    off-centre on a frame-held run, a timing at constant speed) exactly known. A parameter
+    with a component in the null space (eigenvalues of ``J^T J`` below ``1e-15`` of the
+    largest, numpy's ``pinv`` cut) gets an infinite variance and no covariance.
+    """
+    jtj = jac.T @ jac
+    lam, vec = np.linalg.eigh(jtj)
+    null = lam <= 1e-15 * max(float(lam.max(initial=0.0)), 1e-300)
+    cov = np.linalg.pinv(jtj) * s2 * np.outer(scales, scales)
+    free = np.sum(vec[:, null] ** 2, axis=1) > 1e-6
+    cov[free, :] = 0.0
+    cov[:, free] = 0.0
+    cov[free, free] = np.inf
+    return cov
 
 
 class _Fitter:
@@ -1005,7 +1025,8 @@ def _corr_matrix(fit: Fit) -> FloatArray | None:
         return None
     var = np.diag(fit.cov)
     d = np.sqrt(np.maximum(var, 1e-300))
-    corr = fit.cov / np.outer(d, d)
+    with np.errstate(invalid="ignore"):  # inf / inf of an unconstrained parameter
+        corr = fit.cov / np.outer(d, d)
     corr[var <= 0.0, :] = 0.0
     corr[:, var <= 0.0] = 0.0
     corr[~np.isfinite(corr)] = 2.0

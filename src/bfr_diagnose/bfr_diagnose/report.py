@@ -564,6 +564,25 @@ def _finite(x: float) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
+def json_text(d: Diagnosis, indent: int | None = None) -> str:
+    """``d.to_json()`` as strict JSON.
+
+    A value that is not finite (an interval of a parameter the data do not constrain, a
+    metric without samples) is ``null``: Python's ``NaN`` / ``Infinity`` are not JSON.
+    """
+
+    def clean(x: Any) -> Any:
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        if isinstance(x, (float, np.floating)):
+            return _finite(float(x))
+        return x
+
+    return json.dumps(clean(d.to_json()), indent=indent, default=str, allow_nan=False)
+
+
 def write_outputs(d: Diagnosis, out_dir: Path, plots: bool = True,
                   progress: Callable[[str], None] | None = None) -> Path:
     """Write report.md, diagnosis.json, the YAML files and PNGs atomically into out_dir."""
@@ -577,7 +596,7 @@ def write_outputs(d: Diagnosis, out_dir: Path, plots: bool = True,
     try:
         figs = _plots(d, tmp, progress) if plots else []
         (tmp / "report.md").write_text(_markdown(d, figs))
-        (tmp / "diagnosis.json").write_text(json.dumps(d.to_json(), indent=1, default=str))
+        (tmp / "diagnosis.json").write_text(json_text(d, indent=1))
         (tmp / "corrected_params.yaml").write_text(corrected_yaml(d))
         (tmp / "sensor_model.yaml").write_text(sensor_yaml(d))
         if out_dir.exists():
