@@ -274,9 +274,9 @@ def run(opts: BenchOptions, say: Progress) -> list[Figure]:
         Path(opts.profile).mkdir(parents=True, exist_ok=True)
         prof_dir = Path(opts.profile).resolve()
 
-        class _Profiled(NodeSpec):  # the same command under ``python -m cProfile``
+        class _Profiled(NodeSpec):  # the same command under cProfile, timed by CPU time
             def command(self) -> list[str]:
-                return [sys.executable, "-m", "cProfile", "-o",
+                return [sys.executable, "-m", "bfr_tools.bench.cpu_profile",
                         str(prof_dir / f"{self.name}.prof"), *super().command()]
 
         spec_cls = _Profiled
@@ -374,7 +374,8 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
               + (f"; the simulator warned {behind}x that it fell behind real time"
                  if behind else "")
               + (f"; NOTE {died}" if died else "")
-              + ("; UNDER cProfile (slower than normal)" if opts.profile else ""))
+              + ("; UNDER cProfile (slower than normal; main-thread CPU time)"
+                 if opts.profile else ""))
     lat = allw.pop("_lat")
     for w in wins:
         w.pop("_lat")
