@@ -55,7 +55,8 @@ from bfr_ros.node_common import parse_published
 
 from bfr_tools.run import executable_path
 
-__all__ = ["NodeSpec", "RigError", "format_summary", "main", "orbit_start", "summarize_bag"]
+__all__ = ["NodeSpec", "RigError", "format_summary", "main", "may_raise_priority", "orbit_start",
+           "set_autogroup_nice", "summarize_bag"]
 
 _NS = 1_000_000_000
 NODES = {  # name -> (package, executable)
@@ -201,7 +202,7 @@ def set_autogroup_nice(pid: int, nice: int) -> bool:
     return True
 
 
-def _may_raise_priority(nice: int) -> bool:
+def may_raise_priority(nice: int) -> bool:
     """Whether this process may start children at niceness ``nice`` (< 0: CAP_SYS_NICE)."""
     try:
         return os.getpriority(os.PRIO_PROCESS, 0) + nice >= -20 and (
@@ -588,7 +589,7 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
     order = [n for n in ("recorder", "camera", "controller", "simulator")
              if n != "recorder" or bag is not None]
     nice = args.nice if args.mode == "realtime" else 0
-    if nice < 0 and not _may_raise_priority(nice):
+    if nice < 0 and not may_raise_priority(nice):
         print(f"bfr rig: note: raising the nodes' priority (nice {nice}) is not permitted "
               f"here; they run at normal priority and a busy machine may slow the "
               f"simulation down", flush=True)
