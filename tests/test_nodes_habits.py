@@ -18,7 +18,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 import rosutil
-from bfr_ros.node_common import CdrError, RawImage, image_to_array, parse_joint_state
+from bfr_ros.node_common import (
+    JOINT_STATES_POLLED_QOS,
+    CdrError,
+    PolledSubscription,
+    RawImage,
+    image_to_array,
+    parse_joint_state,
+)
 from rcl_interfaces.msg import Parameter, ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.serialization import serialize_message
@@ -148,3 +155,29 @@ def test_image_parser_agrees_with_rclpy() -> None:
         assert err == "" and np.array_equal(got, arr)
     with pytest.raises(CdrError, match="truncated"):
         RawImage(serialize_message(img)[:-4])
+
+
+# -- messages taken by the node, not by the executor ------------------------------------------
+def test_polled_subscription_takes_every_message_the_executor_does_not(
+        ros_harness: rosutil.RosHarness) -> None:
+    h = ros_harness
+    served: list[object] = []
+    h.node.create_subscription(JointState, "polled_js", served.append, 100)  # an ordinary one
+    polled = PolledSubscription(h.node, JointState, "polled_js", JOINT_STATES_POLLED_QOS)
+    assert polled.topic_name == "/polled_js"
+    pub = h.node.create_publisher(JointState, "polled_js", 100)
+    h.wait_for_match(pub, count=2, timeout=10)
+    assert polled.get_publisher_count() == 1
+    js = JointState()
+    js.name = ["frame_joint"]
+    for k in range(50):
+        js.header.stamp.nanosec = k + 1
+        js.position = [0.01 * k]
+        pub.publish(js)
+    assert h.spin_until(lambda: len(served) == 50, timeout=10)  # the executor ran meanwhile
+    taken = polled.take()
+    assert [parse_joint_state(r)[0] for r in taken] == list(range(1, 51))  # all, in order
+    assert [parse_joint_state(r)[2][0] for r in taken] == [0.01 * k for k in range(50)]
+    assert polled.take() == [] and polled.taken == 50
+    polled.destroy()
+    polled.destroy()  # idempotent

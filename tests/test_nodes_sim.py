@@ -110,6 +110,10 @@ def test_simulator_lockstep_contract(ros_harness: rosutil.RosHarness, node_proce
     tl = tr_t[tr_t <= lock]
     assert tl.size == lock // 5_000_000 + 1 and set(np.diff(tl)) == {5_000_000}
     assert np.all(np.diff(ctl.clock) >= 0)
+    # /clock with the frames (200 Hz), not with every encoder sample (clock.rate)
+    cl = np.unique(np.array(ctl.clock))
+    cl = cl[cl <= lock]
+    assert np.all(cl % 5_000_000 == 0) and cl.size >= 0.9 * (lock // 5_000_000 + 1)
     # the actuator: clamped to the -p override, the NaN ignored, then the timeout
     torque = {rosutil.stamp_ns(m): m.torque for m in ctl.truth}
     assert torque[500_000_000] == pytest.approx(0.05)

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import ast
 import math
+import os
+import subprocess
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -16,7 +19,7 @@ from bfr_model.params import load_params
 from bfr_ros.node_common import _cast, flatten, image_to_array, unflatten
 from bfr_sim.simulator_node import RigSimulation, Schedule
 from bfr_sim.simulator_node import node_defaults as sim_defaults
-from bfr_tools.rig import orbit_start
+from bfr_tools.rig import orbit_start, set_autogroup_nice
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -182,6 +185,21 @@ def test_schedule_on_the_step_grid() -> None:
 
 
 # -- rig: start on the orbit, the launch file ---------------------------------------------------
+def test_set_autogroup_nice() -> None:
+    if not Path("/proc/self/autogroup").exists():
+        assert not set_autogroup_nice(os.getpid(), 5)  # no autogroups: says so
+        return
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(10)"],
+                             start_new_session=True)  # a session (autogroup) of its own
+    try:
+        assert set_autogroup_nice(child.pid, 5)  # raising niceness needs no privilege
+        assert Path(f"/proc/{child.pid}/autogroup").read_text().split()[-1] == "5"
+    finally:
+        child.kill()
+        child.wait()
+    assert not set_autogroup_nice(child.pid, 5)  # gone: False, no exception
+
+
 def test_orbit_start_is_on_the_controller_orbit() -> None:
     s = orbit_start(0.3, 0.0)
     assert s["initial.phi"] == pytest.approx(0.3)

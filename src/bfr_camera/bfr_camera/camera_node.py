@@ -5,7 +5,8 @@ A thin node over :class:`bfr_camera.detector.BallDetector`:
 - subscribes ``camera/image_raw`` (``sensor_msgs/Image``; mono8, mono16, 32FC1 or colour),
   ``camera/camera_info`` (the intrinsics: size, K, D, distortion model) and
   ``joint_states`` (the frame angle theta, interpolated at each frame's exposure mid-time
-  from a short buffer, for the observation's ``phi = theta + atan2(x, y)``); images and
+  from a short buffer, for the observation's ``phi = theta + atan2(x, y)``; the samples are
+  taken from the subscription's queue at each image, not one callback per sample); images and
   camera_info with sensor-data QoS keeping the newest message only (best effort, keep last
   1: after a stall the node measures the present image, it never works through a backlog);
 - publishes one ``ball_observation`` (``bfr_interfaces/BallObservation``, reliable) per
@@ -44,6 +45,7 @@ import time
 from collections import deque
 from typing import Any
 
+import cv2
 import numpy as np
 from bfr_model.dynamics import RigidModel
 from bfr_model.param_file import check, config_path
@@ -52,9 +54,10 @@ from bfr_model.scene import fix_markers
 from bfr_ros.markers import MARKER_QOS, MarkerPublisher, image_circle
 from bfr_ros.node_common import (
     IMAGE_SUB_QOS,
-    JOINT_STATES_QOS,
+    JOINT_STATES_POLLED_QOS,
     STATE_QOS,
     CdrError,
+    PolledSubscription,
     RawImage,
     Throttle,
     declare_parameter_tree,
@@ -67,6 +70,7 @@ from bfr_ros.node_common import (
     run_node,
 )
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import CameraInfo, Image, JointState
 from visualization_msgs.msg import ImageMarker
 
@@ -168,6 +172,9 @@ class CameraNode(Node):
 
     def __init__(self) -> None:
         super().__init__("camera")
+        # one frame at a time: OpenCV's worker threads cost more than they save on the
+        # detector's calls (they spin after each job: 0.15-0.19 cores of system time here)
+        cv2.setNumThreads(1)
         self.defaults = node_defaults()
         declare_parameter_tree(self, self.defaults)
         p = read_parameter_tree(self, self.defaults)
@@ -192,13 +199,16 @@ class CameraNode(Node):
         self.detection_pub = (self.create_publisher(ImageMarker, "camera/detection", MARKER_QOS)
                               if self.markers.pub is not None else None)
         # images and joint_states arrive serialized and are parsed here (RawImage,
-        # parse_joint_state): no Python message object per image or encoder sample
+        # parse_joint_state): no Python message object per image or encoder sample. The
+        # encoder samples and camera_info are taken at each image (and by the watchdog), not
+        # one callback each (PolledSubscription); a camera_info is read only if it changed
         self.image_sub = self.create_subscription(Image, "camera/image_raw", self._on_image,
                                                   IMAGE_SUB_QOS, raw=True)
-        self.info_sub = self.create_subscription(CameraInfo, "camera/camera_info",
-                                                 self._on_info, IMAGE_SUB_QOS)
-        self.js_sub = self.create_subscription(JointState, "joint_states", self._on_joints,
-                                               JOINT_STATES_QOS, raw=True)
+        self.info_sub = PolledSubscription(self, CameraInfo, "camera/camera_info",
+                                           IMAGE_SUB_QOS)
+        self.info_raw = b""  # the last camera_info taken, without its stamp
+        self.js_sub = PolledSubscription(self, JointState, "joint_states",
+                                         JOINT_STATES_POLLED_QOS)
         self.throttle = Throttle()
         # timeouts on the node's clock: simulated time under use_sim_time
         self.create_timer(max(self.frame_timeout / 4.0, 0.05), self._watchdog)
@@ -237,6 +247,11 @@ class CameraNode(Node):
                 f"{cam.distortion_model} d {[round(float(v), 4) for v in cam.d]}")
 
     # -- inputs ----------------------------------------------------------------------------
+    def take_joints(self) -> None:
+        """Take the encoder samples queued since the last image into the theta buffer."""
+        for raw in self.js_sub.take():
+            self._on_joints(raw)
+
     def _on_joints(self, raw: bytes) -> None:
         try:
             t_ns, names, position, velocity, _ = parse_joint_state(raw)
@@ -255,6 +270,17 @@ class CameraNode(Node):
         theta = float(position[j])
         theta_dot = float(velocity[j]) if j < len(velocity) else 0.0
         self.theta.add(t_ns, theta, theta_dot)
+
+    def take_info(self) -> None:
+        """Take the newest camera_info; read it if it differs from the last (stamp aside)."""
+        taken = self.info_sub.take()
+        if not taken or not self.use_camera_info:
+            return
+        raw = taken[-1]
+        if raw[12:] == self.info_raw:  # CDR: encapsulation, stamp (8 bytes), then the rest
+            return
+        self.info_raw = raw[12:]
+        self._on_info(deserialize_message(raw, CameraInfo))
 
     def _on_info(self, msg: CameraInfo) -> None:
         if not self.use_camera_info:
@@ -296,6 +322,7 @@ class CameraNode(Node):
             self._invalid(out, f"malformed image message: {exc}", t0)
             return
         ns_to_stamp(msg.stamp_ns, out.header.stamp)
+        self.take_info()
         if not self.calibrated:
             self.stats["uncalibrated"] += 1
             self._invalid(out, f"waiting for camera_info on {self.info_sub.topic_name}: "
@@ -306,6 +333,7 @@ class CameraNode(Node):
             self._invalid(out, err, t0)
             return
         t_ns = msg.stamp_ns
+        self.take_joints()
         theta, why = self.theta.theta_at(t_ns)
         det = self.detector.detect(arr, 0.0 if theta is None else theta,
                                    gate=theta is not None)
@@ -379,6 +407,8 @@ class CameraNode(Node):
         self.last_reason = reason.split(" (", maxsplit=1)[0]
 
     def _watchdog(self) -> None:
+        self.take_joints()  # keeps the queue short while no image arrives
+        self.take_info()  # a calibration is logged when it arrives, images or not
         now = self.get_clock().now().nanoseconds
         if now < self.last_image_ns:  # the clock went back (a simulation restarted)
             self.last_image_ns = now
@@ -412,6 +442,8 @@ class CameraNode(Node):
             f"images, {s['uncalibrated']} before camera_info); mean processing "
             f"{1e3 * s['time'] / n:.2f} ms")
         self.get_logger().info(format_published({self.obs_pub.topic_name: s["published"]}))
+        self.js_sub.destroy()
+        self.info_sub.destroy()
 
 
 def main(argv: list[str] | None = None) -> int:

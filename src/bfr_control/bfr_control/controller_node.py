@@ -11,7 +11,10 @@ coordinates, Riccati gains, PFL, supervisor):
 
 When a step runs is ``loop.trigger``: on each observation (the camera rate; the default),
 on each joint_states sample (the encoder rate), or on a timer at ``control.rate``. Encoder
-samples between steps still go into the estimator's history (latency compensation).
+samples between steps still go into the estimator's history (latency compensation). Unless
+each sample runs a step, the node takes the samples from the subscription's queue when it
+needs them (at each observation, timer step and watchdog check, and every
+``loop.max_step_gap / 2`` of wall time): one C call per sample instead of a Python callback.
 
 Safety, in the node whatever the core does:
 
@@ -21,7 +24,8 @@ Safety, in the node whatever the core does:
 - BALL_LOST (no valid fix for ``supervisor.lost_timeout``, the ball stopped or far from the
   orbit) is latched: zero torque until the node is restarted or ``~/reset`` is called;
 - with the observation trigger a joint_states sample ``loop.max_step_gap`` after the last
-  step runs a step anyway, so a dead camera is noticed in time;
+  step runs a step anyway (taken within ``max_step_gap / 2``), so a dead camera is noticed
+  in time;
 - no joint_states for ``safety.watchdog_timeout`` seconds of the node's clock (simulated
   time under ``use_sim_time``: dead driver or simulator), non-finite or malformed samples,
   or samples stamped more than ``safety.max_stamp_age`` away from the node's clock: zero
@@ -61,9 +65,11 @@ from bfr_model.param_file import check, config_path, nonnegative, one_of
 from bfr_model.params import default_params_path, params_from_dict
 from bfr_ros.node_common import (
     COMMAND_QOS,
+    JOINT_STATES_POLLED_QOS,
     JOINT_STATES_QOS,
     STATE_QOS,
     CdrError,
+    PolledSubscription,
     declare_parameter_tree,
     format_published,
     load_yaml_parameters,
@@ -72,6 +78,7 @@ from bfr_ros.node_common import (
     run_node,
     stamp_to_ns,
 )
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -163,9 +170,16 @@ class ControllerNode(Node):
                                              COMMAND_QOS)
         self.state_pub = self.create_publisher(ControllerState, "controller_state", STATE_QOS)
         # joint_states arrive serialized and are parsed here (parse_joint_state): no Python
-        # message object per encoder sample at the encoder's rate
-        self.js_sub = self.create_subscription(JointState, "joint_states", self._on_joints,
-                                               JOINT_STATES_QOS, raw=True)
+        # message object per encoder sample at the encoder's rate. Unless every sample runs a
+        # step, they are taken from the subscription's queue when the node needs them (an
+        # observation, the timer, the watchdog, a take timer), not one callback each
+        self.js_sub: Any
+        if self.trigger == "joint_states":
+            self.js_sub = self.create_subscription(JointState, "joint_states", self._on_joints,
+                                                   JOINT_STATES_QOS, raw=True)
+        else:
+            self.js_sub = PolledSubscription(self, JointState, "joint_states",
+                                             JOINT_STATES_POLLED_QOS)
         self.obs_sub = self.create_subscription(BallObservationMsg, "ball_observation",
                                                 self._on_ball, STATE_QOS)
         self.create_service(Trigger, "~/reset", self._on_reset)
@@ -173,6 +187,12 @@ class ControllerNode(Node):
         self.create_timer(min(0.1, self.watchdog_timeout / 2.0), self._watchdog)
         if self.trigger == "timer":
             self.create_timer(1.0 / config.control.rate, self._on_timer)
+        elif self.trigger == "observation":
+            # without observations (a dead camera) the samples are still taken: steps without
+            # a fix (max_step_gap), faults. On the steady clock, so that a bad sample is
+            # answered at once even while a simulation's clock stands still
+            self.create_timer(max(float(loop["max_step_gap"]) / 2.0, 1e-3), self.take_joints,
+                              clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.js: tuple[int, float, float] | None = None  # newest good sample
         self.js_clock_ns = self.get_clock().now().nanoseconds  # node clock at its arrival
         self.first_js_ns: int | None = None
@@ -213,8 +233,11 @@ class ControllerNode(Node):
         ctrl.reset()
 
     # -- inputs ----------------------------------------------------------------------------
-    def _parse_joints(self, raw: bytes) -> tuple[int, float, float] | str | None:
-        """(t_ns, theta, theta_dot), a fault string, or None (another joint's message)."""
+    def _parse_joints(self, raw: bytes, now: int) -> tuple[int, float, float] | str | None:
+        """(t_ns, theta, theta_dot), a fault string, or None (another joint's message).
+
+        ``now`` is the node's clock [ns] at the message's arrival (or take).
+        """
         try:
             t_ns, names, position, velocity, _ = parse_joint_state(raw)
         except CdrError as exc:
@@ -231,8 +254,6 @@ class ControllerNode(Node):
         theta, theta_dot = float(position[j]), float(velocity[j])
         if not (math.isfinite(theta) and math.isfinite(theta_dot)):
             return f"non-finite joint_states sample (theta {theta}, theta_dot {theta_dot})"
-        clock = self.get_clock()
-        now = clock.now().nanoseconds
         if now > 0 and abs(now - t_ns) > self.max_age_ns:
             return (f"joint_states stamped {(now - t_ns) / _NS:+.3f} s from the node's clock "
                     f"(> {self.max_age_ns / _NS:g} s): stale data or a clock mismatch "
@@ -258,15 +279,26 @@ class ControllerNode(Node):
             self._enter_fault(why, None, log=False)
             self.exception_fault = True
 
+    def take_joints(self) -> None:
+        """Take the queued encoder samples (one :meth:`_on_joints` each, oldest first)."""
+        if isinstance(self.js_sub, PolledSubscription):
+            taken = self.js_sub.take()
+            if taken:
+                now = self.get_clock().now().nanoseconds  # one clock read for them all
+                for raw in taken:
+                    self._on_joints(raw, now)
+
     @guarded("joint_states")
-    def _on_joints(self, raw: bytes) -> None:
-        got = self._parse_joints(raw)
+    def _on_joints(self, raw: bytes, now: int | None = None) -> None:
+        if now is None:  # a callback (loop.trigger joint_states)
+            now = self.get_clock().now().nanoseconds
+        got = self._parse_joints(raw, now)
         if got is None:
             return
         if isinstance(got, str):
             self._enter_fault(got, None)
             return
-        self.js_clock_ns = self.get_clock().now().nanoseconds
+        self.js_clock_ns = now
         if self.fault and not self.exception_fault:
             self.get_logger().info(f"{self.js_sub.topic_name} good again after: {self.fault}; "
                                    f"controller restarts in WAITING")
@@ -293,6 +325,7 @@ class ControllerNode(Node):
 
     @guarded("ball_observation")
     def _on_ball(self, msg: BallObservationMsg) -> None:
+        self.take_joints()  # the encoder samples that arrived before this observation
         self.stats["observations"] += 1
         t_ns = stamp_to_ns(msg.header.stamp)
         valid = bool(msg.valid) and msg.status == BallObservationMsg.FOUND
@@ -305,6 +338,7 @@ class ControllerNode(Node):
 
     @guarded("timer")
     def _on_timer(self) -> None:
+        self.take_joints()
         if self.js is not None and (not self.fault or self.exception_fault) and (
                 self.last_step_ns is None or self.js[0] > self.last_step_ns):
             self._step()
@@ -433,6 +467,7 @@ class ControllerNode(Node):
 
     @guarded("watchdog")
     def _watchdog(self) -> None:
+        self.take_joints()
         now = self.get_clock().now().nanoseconds
         if now < self.js_clock_ns:  # the clock went back (a simulation restarted)
             self.js_clock_ns = now
@@ -465,6 +500,8 @@ class ControllerNode(Node):
             f"zero torque published on exit")
         self.get_logger().info(format_published({self.cmd_pub.topic_name: s["commands"] + 1,
                                                  self.state_pub.topic_name: s["states"]}))
+        if isinstance(self.js_sub, PolledSubscription):
+            self.js_sub.destroy()
 
 
 def main(argv: list[str] | None = None) -> int:

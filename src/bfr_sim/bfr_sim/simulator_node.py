@@ -44,7 +44,9 @@ The effort command: one element (``joint_states.joint_name``), clamped to
 a warning; no command for ``command.timeout`` simulated seconds means zero torque. The
 simulator never publishes on ``effort_controller/commands``.
 
-Time: simulated time starts at 0 and is published on ``/clock``; every other node runs with
+Time: simulated time starts at 0 and is published on ``/clock`` with every camera frame and
+otherwise at ``clock.rate`` (200 Hz: not with every encoder sample, which would cost every
+sim-time node a callback per sample); every other node runs with
 ``use_sim_time:=true`` (``bfr rig`` and the launch file set it). Images are stamped with the
 exposure mid-time (the state they show), published ``render.latency`` later.
 """
@@ -57,6 +59,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Any
 
+import cv2
 import numpy as np
 from bfr_camera.calibration import CameraModel, camera_from_dict, default_camera_path
 from bfr_model.dynamics import RigidModel, curve_terms
@@ -275,6 +278,9 @@ class SimulatorNode(Node):
 
     def __init__(self) -> None:
         super().__init__("simulator")
+        # one frame at a time: OpenCV's worker threads cost more than they save on the
+        # renderer's calls (they spin after each job: 0.15-0.19 cores of system time here)
+        cv2.setNumThreads(1)
         self.defaults = node_defaults()
         # camera.yaml may be given whole: its detector.* group is the camera node's
         declare_parameter_tree(self, self.defaults,
@@ -299,6 +305,7 @@ class SimulatorNode(Node):
         self.pub_truth = bool(p["truth"]["publish"])
         self.truth_sched = Schedule(p["truth"]["rate"], step_ns, "truth.rate")
         self.pub_clock = bool(p["clock"]["publish"])
+        self.clock_sched = Schedule(p["clock"]["rate"], step_ns, "clock.rate")
         r = p["render"]
         self.pub_images = bool(r["publish"])
         self.frame_sched = Schedule(self.camera.frame_rate, step_ns, "camera.frame_rate")
@@ -472,7 +479,8 @@ class SimulatorNode(Node):
         frame_out = bool(self.pending) and self.pending[0][0] <= t_ns
         js_due = self.js_sched.due(t_ns)
         truth_due = self.pub_truth and self.truth_sched.due(t_ns)
-        if frame_out or js_due or truth_due:
+        clock_due = self.clock_sched.due(t_ns)
+        if frame_out or clock_due:  # not with every encoder sample (clock.rate)
             self._publish_clock(t_ns)
         if frame_out or js_due:
             self._publish_joint_state(t_ns)

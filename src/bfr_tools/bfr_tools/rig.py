@@ -55,7 +55,8 @@ from bfr_ros.node_common import parse_published
 
 from bfr_tools.run import executable_path
 
-__all__ = ["NodeSpec", "RigError", "format_summary", "main", "orbit_start", "summarize_bag"]
+__all__ = ["NodeSpec", "RigError", "format_summary", "main", "may_raise_priority", "orbit_start",
+           "set_autogroup_nice", "summarize_bag"]
 
 _NS = 1_000_000_000
 NODES = {  # name -> (package, executable)
@@ -125,7 +126,12 @@ class NodeSpec:
         """Start the process with stdout and stderr into ``<log_dir>/<name>.log``.
 
         ``nice`` < 0 raises its scheduling priority before it runs (every thread it starts
-        inherits it), where the system permits; else it runs at the normal priority.
+        inherits it), where the system permits; else it runs at the normal priority. With a
+        raised priority the node also runs in a session of its own whose autogroup gets the
+        same niceness (:func:`set_autogroup_nice`): where the kernel groups processes by
+        session (``/proc/sys/kernel/sched_autogroup_enabled``), a process's niceness ranks
+        it only within its session, and another user's busy session shares the CPUs equally
+        with the rig's whatever the nodes' niceness.
         """
         self.log_path = log_dir / f"{self.name}.log"
         self.log = self.log_path.open("wb")
@@ -134,7 +140,10 @@ class NodeSpec:
         if tool:  # nice(1) execs the node: same pid, signals reach it
             command = [tool, "-n", str(nice), *command]
         self.process = subprocess.Popen(command, env=env, stdin=subprocess.DEVNULL,
-                                        stdout=self.log, stderr=subprocess.STDOUT)
+                                        stdout=self.log, stderr=subprocess.STDOUT,
+                                        start_new_session=nice < 0)
+        if nice < 0:
+            set_autogroup_nice(self.process.pid, nice)
 
     @property
     def returncode(self) -> int | None:
@@ -178,7 +187,22 @@ def _describe_exit(code: int) -> str:
     return f"exit status {code}"
 
 
-def _may_raise_priority(nice: int) -> bool:
+def set_autogroup_nice(pid: int, nice: int) -> bool:
+    """Set the niceness of the scheduler autogroup of ``pid``'s session; False if not possible.
+
+    On kernels with autogroup scheduling the CPU is shared first among sessions (autogroups),
+    by the autogroup's niceness (``/proc/<pid>/autogroup``, 0 by default), and only then among
+    the processes of a session by their own niceness. Lowering it needs the same permission
+    as lowering a process's niceness. No autogroup file (kernel without autogroups): False.
+    """
+    try:
+        Path(f"/proc/{pid}/autogroup").write_text(f"{int(nice)}\n")
+    except OSError:
+        return False
+    return True
+
+
+def may_raise_priority(nice: int) -> bool:
     """Whether this process may start children at niceness ``nice`` (< 0: CAP_SYS_NICE)."""
     try:
         return os.getpriority(os.PRIO_PROCESS, 0) + nice >= -20 and (
@@ -492,7 +516,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="ROS_DOMAIN_ID for the nodes: a number, or 'auto' for a free one with "
                         "localhost-only discovery (default: the environment's)")
     p.add_argument("--nice", type=int, default=-10, metavar="N",
-                   help="realtime: start the nodes at this niceness (default -10: above the "
+                   help="realtime: start the nodes at this niceness, each in a session of "
+                        "its own with that autogroup niceness (default -10: above the "
                         "machine's other work, as a real-time control loop runs; needs the "
                         "permission to raise priorities, else normal priority with a note)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
@@ -564,7 +589,7 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
     order = [n for n in ("recorder", "camera", "controller", "simulator")
              if n != "recorder" or bag is not None]
     nice = args.nice if args.mode == "realtime" else 0
-    if nice < 0 and not _may_raise_priority(nice):
+    if nice < 0 and not may_raise_priority(nice):
         print(f"bfr rig: note: raising the nodes' priority (nice {nice}) is not permitted "
               f"here; they run at normal priority and a busy machine may slow the "
               f"simulation down", flush=True)

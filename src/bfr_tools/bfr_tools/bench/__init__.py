@@ -290,9 +290,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--keep", metavar="DIR",
                    help="keep intermediate files (recording, node logs) in DIR")
     p.add_argument("--profile", metavar="DIR",
-                   help="run the loop's node processes and bfr diagnose under cProfile and "
-                        "write <node>.prof / diagnose.prof to DIR (the figures are then "
-                        "slower: for finding what limits them, not for the record)")
+                   help="run the loop's node processes (timed by their main thread's CPU "
+                        "time) and bfr diagnose under cProfile and write <node>.prof / "
+                        "diagnose.prof to DIR (the figures are then slower: for finding what "
+                        "limits them, not for the record)")
     p.add_argument("--strict", action="store_true",
                    help="exit with status 1 when a budget is not met")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

@@ -1,8 +1,10 @@
 """``bfr bench`` section ``loop``: the node suite over DDS, every node in its own process.
 
-Started as ``bfr rig`` starts them (the ament executables, :class:`bfr_tools.rig.NodeSpec`),
-without the recorder, on a private graph (a ``ROS_DOMAIN_ID`` claimed with the same lock files
-as the tests' helpers, ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``):
+Started as ``bfr rig --realtime`` starts them (the ament executables,
+:class:`bfr_tools.rig.NodeSpec`; at nice -10, each in a session of its own with that
+autogroup niceness, where permitted: other sessions' work on a shared machine then disturbs
+the figures less), without the recorder, on a private graph (a ``ROS_DOMAIN_ID`` claimed
+with the same lock files as the tests' helpers, ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``):
 
 - ``simulator_node`` in real-time mode (``sim.mode:=realtime``; RK4 1 kHz, camera 200 Hz
   640x480 mono8, joint_states 1 kHz (``joint_states.rate:=1000``, the rig's encoder rate),
@@ -78,13 +80,14 @@ from bfr_tools.bench.common import (
     Progress,
     not_measured,
 )
-from bfr_tools.rig import NODES, NodeSpec, orbit_start
+from bfr_tools.rig import NODES, NodeSpec, may_raise_priority, orbit_start
 from bfr_tools.run import executable_path
 
 __all__ = ["SPECS", "run"]
 
 _NS = 1_000_000_000
 _FRAME_NS = 5_000_000  # 200 Hz
+_NICE = -10  # the nodes' niceness where permitted, as ``bfr rig --realtime`` starts them
 
 SPECS: list[FigureSpec] = [
     FigureSpec("loop.latency_median_ms",
@@ -274,9 +277,9 @@ def run(opts: BenchOptions, say: Progress) -> list[Figure]:
         Path(opts.profile).mkdir(parents=True, exist_ok=True)
         prof_dir = Path(opts.profile).resolve()
 
-        class _Profiled(NodeSpec):  # the same command under ``python -m cProfile``
+        class _Profiled(NodeSpec):  # the same command under cProfile, timed by CPU time
             def command(self) -> list[str]:
-                return [sys.executable, "-m", "cProfile", "-o",
+                return [sys.executable, "-m", "bfr_tools.bench.cpu_profile",
                         str(prof_dir / f"{self.name}.prof"), *super().command()]
 
         spec_cls = _Profiled
@@ -288,11 +291,13 @@ def run(opts: BenchOptions, say: Progress) -> list[Figure]:
     }
     rec = None
     try:
-        say(f"loop: ROS_DOMAIN_ID {domain}; starting the camera and controller nodes")
+        nice = _NICE if may_raise_priority(_NICE) else 0
+        say(f"loop: ROS_DOMAIN_ID {domain}; starting the camera and controller nodes (nice "
+            f"{nice}{', sessions of their own' if nice else ''})")
         rec = _Recorder()
         for name in ("camera", "controller"):
-            nodes[name].start(log_dir, env)
-        return _measure(opts, say, rec, nodes)
+            nodes[name].start(log_dir, env, nice)
+        return _measure(opts, say, rec, nodes, nice)
     finally:
         for name in ("simulator", "controller", "camera"):
             nodes[name].stop()
@@ -310,7 +315,7 @@ def _dead(nodes: dict[str, Any]) -> str:
 
 
 def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
-             nodes: dict[str, Any]) -> list[Figure]:
+             nodes: dict[str, Any], nice: int) -> list[Figure]:
     # the simulator starts only once the camera and controller nodes are up (their
     # publishers matched), so that the ball is not left alone while they load
     ready = rec.spin_until(lambda: (rec.matched()["obs"] > 0 and rec.matched()["state"] > 0
@@ -321,7 +326,7 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
     rec.spin_for(1.0)
     say("loop: camera and controller up; starting the simulator (real time)")
     nodes["simulator"].start(nodes["camera"].log_path.parent, dict(os.environ,
-                                                                  PYTHONUNBUFFERED="1"))
+                                                                  PYTHONUNBUFFERED="1"), nice)
     flowing = rec.spin_until(lambda: (min(rec.matched().values()) > 0 and len(rec.modes) > 10)
                              or bool(_dead(nodes)), 90.0)
     if not flowing or _dead(nodes):
@@ -370,11 +375,14 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
     cpu["bench"] = 100.0 * bench_cpu / span
     cpu_txt = ", ".join(f"{n} {c:.0f} %" for n, c in cpu.items())
     common = (f"{opts.loop_duration:g} s wall in {opts.loop_windows} window(s); load "
-              f"{load0:.2f} at start; CPU (% of one core): {cpu_txt}"
+              f"{load0:.2f} at start; nodes at nice {nice}"
+              + (" in sessions of their own (as bfr rig --realtime)" if nice else "")
+              + f"; CPU (% of one core): {cpu_txt}"
               + (f"; the simulator warned {behind}x that it fell behind real time"
                  if behind else "")
               + (f"; NOTE {died}" if died else "")
-              + ("; UNDER cProfile (slower than normal)" if opts.profile else ""))
+              + ("; UNDER cProfile (slower than normal; main-thread CPU time)"
+                 if opts.profile else ""))
     lat = allw.pop("_lat")
     for w in wins:
         w.pop("_lat")
