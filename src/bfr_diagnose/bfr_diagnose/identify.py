@@ -1060,6 +1060,14 @@ def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
                 return f"{name}.{eff.names[j]} at its lower bound {lo[j]:.3g}"
             if hi[j] - v < tol[j] and hi[j] - x0[j] >= tol[j]:
                 return f"{name}.{eff.names[j]} at its upper bound {hi[j]:.3g}"
+    if fit.cov is not None:  # a direction of the Jacobian's null space (see _covariance)
+        free = np.nonzero(np.isinf(np.diag(fit.cov))[:fit.n_params])[0]
+        if free.size:
+            offs = _offsets(fit)
+            k = int(np.searchsorted(offs, free[0], side="right") - 1)
+            eff = EFFECTS[fit.effects[k]]
+            return (f"{eff.name}.{eff.names[free[0] - offs[k]]} not fixed by these data "
+                    "(it moves together with other parameters: only a combination is known)")
     corr = _corr_matrix(fit)
     if corr is not None and len(fit.effects) > 1:
         offs = _offsets(fit)
