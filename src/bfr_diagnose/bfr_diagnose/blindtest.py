@@ -57,7 +57,7 @@ from bfr_model.params import RigParams, load_params
 from bfr_model.recording import Recording
 
 from bfr_diagnose.api import DiagnoseOptions, diagnose_recording
-from bfr_diagnose.effects import EFFECT_NAMES, EFFECTS, SHAPE_ORDERS
+from bfr_diagnose.effects import EFFECT_NAMES, EFFECTS, SHAPE_ORDERS, param_value, shape_truth
 from bfr_diagnose.synth import (
     LogConventions,
     SynthConfig,
@@ -156,7 +156,7 @@ def _draw_effect(name: str, base: RigParams, rng: np.random.Generator, scale: fl
            "ball_inertia": ("ball.inertia", 0.05, 0.15)}
     if name in rel:
         key, lo, hi = rel[name]
-        nom = float(_get(base, key))
+        nom = param_value(base, key)
         v = nom * (1.0 + sign * mag(lo, hi))
         return {key: v}, [v]
     if name == "ball_mass":
@@ -179,12 +179,7 @@ def _draw_effect(name: str, base: RigParams, rng: np.random.Generator, scale: fl
         k = int(rng.choice(SHAPE_ORDERS))
         amp = mag(1.5e-4, 4e-4)
         ang = float(rng.uniform(0, 2 * np.pi))
-        cc, ss = amp * math.cos(ang), amp * math.sin(ang)
-        vec = [0.0] * (2 * len(SHAPE_ORDERS))
-        i = SHAPE_ORDERS.index(k)
-        vec[2 * i], vec[2 * i + 1] = cc, ss
-        return ({"frame.contour.harmonic_orders": (k,), "frame.contour.harmonic_cos": (cc,),
-                 "frame.contour.harmonic_sin": (ss,)}, vec)
+        return shape_truth(k, amp * math.cos(ang), amp * math.sin(ang))
     if name == "track_bumps":
         h = sign * mag(5e-4, 9e-4)
         w = float(rng.uniform(0.09, 0.15))
@@ -192,13 +187,6 @@ def _draw_effect(name: str, base: RigParams, rng: np.random.Generator, scale: fl
         return ({"track.bump_phi": (ph,), "track.bump_height": (h,), "track.bump_width": (w,)},
                 [ph, h, w])
     raise ValueError(f"no draw for effect {name!r}")
-
-
-def _get(base: RigParams, key: str) -> float:
-    obj: Any = base
-    for part in key.split("."):
-        obj = getattr(obj, part)
-    return float(obj)
 
 
 def draw_sensors(rng: np.random.Generator, writer: str) -> SensorDraw:

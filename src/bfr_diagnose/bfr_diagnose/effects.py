@@ -62,6 +62,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 from bfr_model.params import RigParams
@@ -70,8 +71,8 @@ from bfr_diagnose.preprocess import SensorCorrection
 
 __all__ = ["DESTINATION", "EFFECTS", "EFFECT_NAMES", "FRAME_ONLY_EFFECTS", "MIN_SIZE",
            "SENSOR_PARAMS", "SHAPE_ORDERS", "Effect", "SensorParam", "apply_effects",
-           "display_values", "effect_size", "plausibility", "sensor_correction",
-           "sensor_names_for"]
+           "display_values", "effect_size", "param_value", "plausibility", "sensor_correction",
+           "sensor_names_for", "shape_truth"]
 
 #: Contour harmonic orders fitted by ``frame_shape`` (k = 1: frame off-centre on the shaft;
 #: k = 2 is ``frame_contour``'s b; a sin 2 phi term is a turn of the contour, i.e. the
@@ -121,16 +122,29 @@ class Effect:
         return len(self.names)
 
 
-def _get(base: RigParams, key: str) -> float:
+def param_value(base: RigParams, key: str) -> float:
+    """The scalar parameter ``key`` (dotted rig.yaml name, e.g. ``frame.inertia``) of base."""
     obj = base
     for part in key.split("."):
         obj = getattr(obj, part)
     return float(obj)
 
 
+def shape_truth(k: int, c: float, s: float) -> tuple[dict[str, Any], list[float]]:
+    """One contour harmonic ``c cos k phi + s sin k phi`` [m]: rig.yaml changes, true vector.
+
+    The vector is ``frame_shape``'s parameters (the values a blind test scores against).
+    """
+    vec = [0.0] * (2 * len(SHAPE_ORDERS))
+    i = SHAPE_ORDERS.index(k)
+    vec[2 * i], vec[2 * i + 1] = c, s
+    return ({"frame.contour.harmonic_orders": (k,), "frame.contour.harmonic_cos": (c,),
+             "frame.contour.harmonic_sin": (s,)}, vec)
+
+
 def _scalar(key: str) -> tuple[Callable, Callable]:
     def get(base: RigParams) -> tuple[float]:
-        return (_get(base, key),)
+        return (param_value(base, key),)
 
     def put(base: RigParams, v: np.ndarray) -> tuple[RigParams, SensorCorrection]:
         return base.replace(**{key: float(v[0])}), _NONE

@@ -32,7 +32,7 @@ import numpy as np
 from bfr_model.params import RigParams
 
 from bfr_diagnose.blindtest import CONTACT_EFFECTS, SensorDraw, draw_sensors
-from bfr_diagnose.effects import EFFECT_NAMES, MIN_SIZE, SHAPE_ORDERS
+from bfr_diagnose.effects import EFFECT_NAMES, MIN_SIZE, SHAPE_ORDERS, param_value, shape_truth
 
 __all__ = ["FLOOR", "GAIN_SCALES", "KIND_PATTERN", "ORBIT_SPEEDS", "SCALAR_EFFECTS", "LimitCase",
            "draw_case", "effect_changes"]
@@ -121,15 +121,12 @@ def effect_changes(name: str, size: float, base: RigParams, rng: np.random.Gener
                "joint_viscous_friction": "joint.viscous_friction",
                "rolling_resistance": "track.rolling_resistance",
                "torque_offset": "actuator.torque_offset"}[name]
-        group, field_ = key.split(".")
-        nom = float(getattr(getattr(base, group), field_))
-        v = nom + (_sign(rng) if name == "torque_offset" else 1.0) * size
+        v = param_value(base, key) + (_sign(rng) if name == "torque_offset" else 1.0) * size
         return {key: v}, [v]
     if name in ("frame_inertia", "torque_gain", "ball_inertia"):
         key = {"frame_inertia": "frame.inertia", "torque_gain": "actuator.torque_gain",
                "ball_inertia": "ball.inertia"}[name]
-        group, field_ = key.split(".")
-        v = float(getattr(getattr(base, group), field_)) * (1.0 + _sign(rng) * size)
+        v = param_value(base, key) * (1.0 + _sign(rng) * size)
         return {key: v}, [v]
     if name == "ball_mass":
         v = base.ball.mass * (1.0 + _sign(rng) * size)
@@ -151,12 +148,7 @@ def effect_changes(name: str, size: float, base: RigParams, rng: np.random.Gener
         k = int(rng.choice(SHAPE_ORDERS))
         ang = float(rng.uniform(0.0, 2.0 * math.pi))
         amp = size / max(abs(math.cos(ang)), abs(math.sin(ang)))
-        cc, ss = amp * math.cos(ang), amp * math.sin(ang)
-        vec = [0.0] * (2 * len(SHAPE_ORDERS))
-        i = SHAPE_ORDERS.index(k)
-        vec[2 * i], vec[2 * i + 1] = cc, ss
-        return ({"frame.contour.harmonic_orders": (k,), "frame.contour.harmonic_cos": (cc,),
-                 "frame.contour.harmonic_sin": (ss,)}, vec)
+        return shape_truth(k, amp * math.cos(ang), amp * math.sin(ang))
     if name == "track_bumps":
         h = _sign(rng) * size
         w = float(rng.uniform(0.09, 0.15))
