@@ -504,10 +504,10 @@ def _covariance(jac: FloatArray, s2: float, scales: FloatArray) -> FloatArray:
     with a component in the null space (eigenvalues of ``J^T J`` below ``1e-15`` of the
     largest, numpy's ``pinv`` cut) gets an infinite variance and no covariance.
     """
-    jtj = jac.T @ jac
-    lam, vec = np.linalg.eigh(jtj)
+    lam, vec = np.linalg.eigh(jac.T @ jac)
     null = lam <= 1e-15 * max(float(lam.max(initial=0.0)), 1e-300)
-    cov = np.linalg.pinv(jtj) * s2 * np.outer(scales, scales)
+    kept = vec[:, ~null]
+    cov = (kept / lam[~null]) @ kept.T * s2 * np.outer(scales, scales)  # the pseudo-inverse
     free = np.sum(vec[:, null] ** 2, axis=1) > 1e-6
     cov[free, :] = 0.0
     cov[:, free] = 0.0
