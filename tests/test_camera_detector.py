@@ -14,6 +14,8 @@ from bfr_camera.detector import (
     BallDetector,
     DetectionStatus,
     DetectorConfig,
+    _circle_fit,
+    _cone_kernel,
     detector_config_from_dict,
     load_detector_config,
 )
@@ -304,3 +306,101 @@ def test_perspective_the_ball_image_is_an_ellipse_not_centred_on_the_ball() -> N
         assert d.valid
         assert math.hypot(d.u - truth[0], d.v - truth[1]) < 0.05  # ... and accounted for
         assert abs(d.radius_m - 16.6e-3) < 1e-4
+
+
+# -- the compiled kernels against array forms written apart from them -------------------------
+def _cone_irls_reference(v: np.ndarray, wts: np.ndarray, iters: int, focal: float,
+                         rz: tuple[float, float, float], cz: float, zb: float, rb: float,
+                         prior_sigma: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """The cone fit's rounds in numpy (the detector's module docstring, step 4)."""
+    v3 = v[:, :3]
+    w = np.zeros(3)
+    res = np.zeros(len(v))
+    prior = None
+    scale = sig = 1.0
+    for it in range(iters):
+        a = (v3 * wts[:, None]).T @ v3
+        b = (v3 * wts[:, None]).sum(axis=0)
+        if prior is not None:
+            h, wexp, rho = prior
+            a = a + rho * np.outer(h, h)
+            b = b + rho * wexp * h
+        w = np.linalg.solve(a, b)
+        nw2 = float(w @ w)
+        if nw2 <= 1.0:
+            return None
+        res = (v3 @ w - 1.0) * focal / math.sqrt(nw2 - 1.0)
+        if it < 2:
+            sig = max(1.4826 * float(np.sort(np.abs(res[wts > 0]))[(np.sum(wts > 0) - 1) // 2]),
+                      0.08)
+            scale = 4.685 * sig
+        wts = np.maximum(1.0 - (res / scale) ** 2, 0.0) ** 2
+        if it == iters - 1:
+            break
+        h = w / math.sqrt(nw2)
+        lam = (zb - cz) / float(np.dot(rz, h))
+        if lam > rb:
+            sb = rb / lam
+            prior = (h, 1.0 / math.sqrt(1.0 - sb * sb),
+                     (sig / max(prior_sigma * focal * sb, 1e-3)) ** 2)
+    return w, res, wts
+
+
+def test_compiled_cone_and_circle_kernels_match_array_forms() -> None:
+    rng = np.random.default_rng(7)
+    for trial in range(40):
+        # rays on a cone about a random axis, with noise and a few outliers
+        axis = np.array([rng.normal(0, 0.2), rng.normal(0, 0.2), 1.0])
+        axis /= np.linalg.norm(axis)
+        beta = rng.uniform(0.01, 0.05)
+        e1 = np.cross(axis, [1.0, 0.0, 0.0])
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(axis, e1)
+        n = int(rng.integers(12, 64))
+        ang = np.sort(rng.uniform(0, 2 * np.pi, n))
+        rays = (math.cos(beta) * axis[None, :]
+                + math.sin(beta) * (np.cos(ang)[:, None] * e1 + np.sin(ang)[:, None] * e2))
+        rays += rng.normal(0, 2e-5, rays.shape)
+        rays[: n // 8] += rng.normal(0, 2e-3, (n // 8, 3))  # outliers
+        rays /= np.linalg.norm(rays, axis=1)[:, None]
+        v = np.hstack([rays, np.ones((n, 1))])
+        w0 = rng.uniform(0.2, 1.0, n)
+        args = (600.0, (0.0, 0.0, -1.0), 1.2, 0.0, 0.0166, 0.05)
+        ref = _cone_irls_reference(v, w0.copy(), 3, *args)
+        ok, w, res, wts = _cone_kernel(v, w0.copy(), 3, args[0], *args[1], *args[2:])
+        assert ok == (ref is not None), trial
+        if ref is not None:
+            np.testing.assert_allclose(w, ref[0], rtol=1e-7)  # narrow cone: cond ~1e7
+            # residuals [px] are v.w - 1 (a cancellation) times f / tan(beta) ~ 2e4: Cramer's
+            # rule against LAPACK's solve differ there by ~1e-8 px
+            np.testing.assert_allclose(res, ref[1], atol=1e-6)
+            np.testing.assert_allclose(wts, ref[2], atol=1e-6)
+        # circle: points on a circle plus foreign points on a line
+        cx, cy, r = rng.uniform(20, 60), rng.uniform(20, 60), rng.uniform(8, 20)
+        a = rng.uniform(0, 2 * np.pi, 40)
+        pts = np.c_[cx + r * np.cos(a), cy + r * np.sin(a)] + rng.normal(0, 0.05, (40, 2))
+        pts = np.vstack([pts, np.c_[np.linspace(0, 80, 12), np.full(12, cy + 0.5 * r)]])
+        triples = np.sort(rng.random((48, len(pts))).argsort(axis=1)[:, :3], axis=1)
+        got = _circle_fit(pts, 0.8 * r, 1.2 * r, triples)
+        assert got is not None
+        # the algebraic fit on its 1 px inliers, in numpy
+        inl = np.abs(np.hypot(pts[:, 0] - got[0], pts[:, 1] - got[1]) - got[2]) <= 1.0
+        p = pts[inl] - pts.mean(axis=0)
+        a_mat = np.c_[p, np.ones(len(p))]
+        d, e, f = np.linalg.lstsq(a_mat, -(p ** 2).sum(axis=1), rcond=None)[0]
+        ref_c = (-d / 2 + pts[:, 0].mean(), -e / 2 + pts[:, 1].mean(),
+                 math.sqrt(d * d / 4 + e * e / 4 - f))
+        np.testing.assert_allclose(got, ref_c, rtol=1e-9, atol=1e-9)
+        assert abs(got[0] - cx) < 0.1 and abs(got[1] - cy) < 0.1 and abs(got[2] - r) < 0.1
+
+
+def test_track_gate_table_is_numpy_periodic_interp() -> None:
+    det = BallDetector(CAM, 0.0166)
+    rng = np.random.default_rng(3)
+    a = np.sort(rng.uniform(-1.0, 2 * np.pi - 1.0, 200))
+    r = rng.uniform(0.1, 0.2, 200)
+    det.set_track(a, r)
+    ta, tr = det._track
+    for psi in rng.uniform(-30, 30, 2000):
+        assert np.interp(psi % (2 * np.pi), ta, tr) == pytest.approx(
+            np.interp(psi, a, r, period=2 * np.pi), abs=1e-15)

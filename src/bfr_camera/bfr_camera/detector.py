@@ -326,19 +326,6 @@ def _median(x: np.ndarray) -> float:
     return float(np.partition(x.reshape(-1), k)[k])
 
 
-def _solve3(m: np.ndarray, b: np.ndarray) -> tuple[float, float, float] | None:
-    """Solve the 3x3 system ``m w = b`` by Cramer's rule (None if singular)."""
-    (a0, a1, a2), (b0, b1, b2), (c0, c1, c2) = m.tolist()
-    r0, r1, r2 = b.tolist()
-    det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
-    if not math.isfinite(det) or abs(det) < 1e-300:
-        return None
-    x = (r0 * (b1 * c2 - b2 * c1) - a1 * (r1 * c2 - b2 * r2) + a2 * (r1 * c1 - b1 * r2)) / det
-    y = (a0 * (r1 * c2 - b2 * r2) - r0 * (b0 * c2 - b2 * c0) + a2 * (b0 * r2 - r1 * c0)) / det
-    z = (a0 * (b1 * r2 - r1 * c1) - a1 * (b0 * r2 - r1 * c0) + r0 * (b0 * c1 - b1 * c0)) / det
-    return x, y, z
-
-
 @njit
 def _edge_kernel(prof, pad, half, start, cu, cv, cos, sin):  # noqa: ANN001, ANN202
     """Compiled core of :meth:`BallDetector._edges` on the sampled profiles ``prof`` (n, m).
@@ -469,6 +456,80 @@ def _ransac_circle(x, t, r_lo, r_hi):  # noqa: ANN001, ANN202
     return mask, True
 
 
+@njit
+def _lower_median(x):  # noqa: ANN001, ANN202
+    """Compiled :func:`_median`: the lower middle of a 1-D array (by a sort)."""
+    s = np.sort(x)
+    return s[(s.size - 1) // 2]
+
+
+@njit
+def _solve3_k(g):  # noqa: ANN001, ANN202
+    """Compiled :func:`_solve3` of ``g[:, :3] w = g[:, 3]``: ``(ok, w_x, w_y, w_z)``."""
+    a0, a1, a2 = g[0, 0], g[0, 1], g[0, 2]
+    b0, b1, b2 = g[1, 0], g[1, 1], g[1, 2]
+    c0, c1, c2 = g[2, 0], g[2, 1], g[2, 2]
+    r0, r1, r2 = g[0, 3], g[1, 3], g[2, 3]
+    det = a0 * (b1 * c2 - b2 * c1) - a1 * (b0 * c2 - b2 * c0) + a2 * (b0 * c1 - b1 * c0)
+    if not np.isfinite(det) or abs(det) < 1e-300:
+        return False, 0.0, 0.0, 0.0
+    x = (r0 * (b1 * c2 - b2 * c1) - a1 * (r1 * c2 - b2 * r2) + a2 * (r1 * c1 - b1 * r2)) / det
+    y = (a0 * (r1 * c2 - b2 * r2) - r0 * (b0 * c2 - b2 * c0) + a2 * (b0 * r2 - r1 * c0)) / det
+    z = (a0 * (b1 * r2 - r1 * c1) - a1 * (b0 * r2 - r1 * c0) + r0 * (b0 * c1 - b1 * c0)) / det
+    return True, x, y, z
+
+
+@njit
+def _circle_kernel(pts, r_lo, r_hi, t):  # noqa: ANN001, ANN202
+    """Compiled body of :func:`_circle_fit`: ``(ok, u_c, v_c, r)`` [px].
+
+    The same steps as its docstring says, in loops: centred points, the RANSAC winner's
+    1 px inliers (:func:`_ransac_circle`), the algebraic fit on them (normal equations of
+    ``x^2 + y^2 + D x + E y + F = 0``, Cramer's rule), once more on its own 1 px inliers.
+    """
+    n = pts.shape[0]
+    m0 = 0.0
+    m1 = 0.0
+    for k in range(n):
+        m0 += pts[k, 0]
+        m1 += pts[k, 1]
+    m0 *= 1.0 / n
+    m1 *= 1.0 / n
+    x = np.empty((n, 4))
+    for k in range(n):
+        x[k, 0] = pts[k, 0] - m0
+        x[k, 1] = pts[k, 1] - m1
+        x[k, 2] = 1.0
+        x[k, 3] = -(x[k, 0] ** 2 + x[k, 1] ** 2)
+    keep, found = _ransac_circle(x, t, r_lo, r_hi)
+    if not found:
+        return False, 0.0, 0.0, 0.0
+    cx = cy = r = 0.0
+    for it in range(2):
+        g = np.zeros((3, 4))
+        count = 0
+        for k in range(n):
+            if keep[k]:
+                count += 1
+                for a in range(3):
+                    for b in range(4):
+                        g[a, b] += x[k, a] * x[k, b]
+        if count < 5:
+            return False, 0.0, 0.0, 0.0
+        ok, d, e, f = _solve3_k(g)
+        if not ok:
+            return False, 0.0, 0.0, 0.0
+        cx, cy = -0.5 * d, -0.5 * e
+        r2 = cx * cx + cy * cy - f
+        if not r2 > 0:
+            return False, 0.0, 0.0, 0.0
+        r = math.sqrt(r2)
+        if it == 0:
+            for k in range(n):
+                keep[k] = abs(np.hypot(x[k, 0] - cx, x[k, 1] - cy) - r) <= 1.0
+    return True, cx + m0, cy + m1, r
+
+
 def _circle_fit(pts: np.ndarray, r_lo: float, r_hi: float,
                 triples: np.ndarray) -> tuple[float, float, float] | None:
     """Coarse image-plane circle through edge points, robust to many foreign points.
@@ -479,35 +540,100 @@ def _circle_fit(pts: np.ndarray, r_lo: float, r_hi: float,
     RANSAC over the given index triples (circumcircles, kept if their radius is within
     ``[r_lo, r_hi]``): the circle with the most points within 1 px wins; then the algebraic
     fit ``min sum (x^2 + y^2 + D x + E y + F)^2`` on those points (centre ``(-D/2, -E/2)``,
-    radius ``sqrt(D^2/4 + E^2/4 - F)``), repeated once on its own 1 px inliers.
+    radius ``sqrt(D^2/4 + E^2/4 - F)``), repeated once on its own 1 px inliers. Coordinates
+    are centred on the points' mean first (conditioning). Compiled: :func:`_circle_kernel`.
     """
-    n = pts.shape[0]
-    m = pts.sum(axis=0) * (1.0 / n)
-    x = np.empty((n, 4))
-    x[:, :2] = pts - m
-    x[:, 2] = 1.0
-    x[:, 3] = -(x[:, 0] ** 2 + x[:, 1] ** 2)
-    mask, found = _ransac_circle(x, triples, float(r_lo), float(r_hi))
-    if not found:
-        return None
-    keep = x[mask]
-    out = None
-    for it in range(2):
-        if keep.shape[0] < 5:
-            return None
-        g = keep[:, :3].T @ keep
-        sol = _solve3(g[:, :3], g[:, 3])
-        if sol is None:
-            return None
-        cx, cy = -0.5 * sol[0], -0.5 * sol[1]
-        r2 = cx * cx + cy * cy - sol[2]
-        if not r2 > 0:
-            return None
-        r = math.sqrt(r2)
-        out = (cx + float(m[0]), cy + float(m[1]), r)
-        if it == 0:
-            keep = x[np.abs(np.hypot(x[:, 0] - cx, x[:, 1] - cy) - r) <= 1.0]
-    return out
+    ok, uc, vc, r = _circle_kernel(np.ascontiguousarray(pts, dtype=float), float(r_lo),
+                                   float(r_hi), triples)
+    return (float(uc), float(vc), float(r)) if ok else None
+
+
+@njit
+def _cone_kernel(v, wts, iters, focal, rz0, rz1, rz2, cz, zb, rb,  # noqa: ANN001, ANN202
+                 prior_sigma):  # noqa: ANN001
+    """Compiled iterations of :meth:`BallDetector._cone_fit` (its docstring has the method).
+
+    ``v`` (n, 4) holds the unit edge rays and a column of ones; ``wts`` the initial weights;
+    ``rz*`` the third row of ``R_wc``; ``cz`` the optical centre's height, ``zb`` the ball
+    plane's, ``rb`` the ball radius [m]. Per round: the weighted normal equations
+    ``sum rho_i v_i v_i^T w = sum rho_i v_i`` (plus the radius prior's row from the second
+    round on), Cramer's rule, residuals in pixels ``(v_i . w - 1) f / tan(beta)``, the robust
+    scale from the median absolute residual (first two rounds), Tukey biweights. Returns
+    ``(ok, w, residuals, weights)``.
+    """
+    n = v.shape[0]
+    wts = wts.copy()
+    res = np.zeros(n)
+    w = np.zeros(3)
+    scale = 1.0
+    sig = 1.0
+    has_prior = False
+    hx = hy = hz = wexp = rho = 0.0
+    for it in range(iters):
+        g = np.zeros((3, 4))
+        for i in range(n):
+            wi = wts[i]
+            for a in range(3):
+                va = v[i, a] * wi
+                for b in range(4):
+                    g[a, b] += va * v[i, b]
+        if has_prior:
+            g[0, 0] += rho * hx * hx
+            g[0, 1] += rho * hx * hy
+            g[0, 2] += rho * hx * hz
+            g[1, 0] += rho * hy * hx
+            g[1, 1] += rho * hy * hy
+            g[1, 2] += rho * hy * hz
+            g[2, 0] += rho * hz * hx
+            g[2, 1] += rho * hz * hy
+            g[2, 2] += rho * hz * hz
+            g[0, 3] += rho * wexp * hx
+            g[1, 3] += rho * wexp * hy
+            g[2, 3] += rho * wexp * hz
+        ok, wx, wy, wz = _solve3_k(g)
+        if not ok:
+            return False, w, res, wts
+        nw2 = wx * wx + wy * wy + wz * wz
+        if nw2 <= 1.0:
+            return False, w, res, wts
+        w[0] = wx
+        w[1] = wy
+        w[2] = wz
+        f = focal / math.sqrt(nw2 - 1.0)  # focal / tan(beta)
+        for i in range(n):
+            res[i] = (v[i, 0] * wx + v[i, 1] * wy + v[i, 2] * wz - 1.0) * f
+        if it < 2:  # robust scale from the median absolute residual
+            a_res = np.empty(n)
+            m = 0
+            for i in range(n):
+                if wts[i] > 0:
+                    a_res[m] = abs(res[i])
+                    m += 1
+            sig = max(1.4826 * _lower_median(a_res[:m]), 0.08) if m else 0.08
+            scale = 4.685 * sig
+        nz = 0
+        for i in range(n):
+            u = max(1.0 - (res[i] * (1.0 / scale)) ** 2, 0.0)
+            wts[i] = u * u
+            if wts[i] != 0.0:
+                nz += 1
+        if it == iters - 1:
+            break
+        if nz < 3:
+            return False, w, res, wts
+        # radius prior for the next round, linearised at this solution
+        nw = math.sqrt(nw2)
+        hx, hy, hz = wx / nw, wy / nw, wz / nw
+        dz = rz0 * hx + rz1 * hy + rz2 * hz
+        lam = (zb - cz) / dz if abs(dz) > 1e-12 else -1.0
+        if lam > rb:
+            sb = rb / lam
+            sig_r = max(prior_sigma * focal * sb, 1e-3)
+            # data rows: residual ~ tan(beta) e_px / f; prior row: ~ tan(beta) dr_px / f
+            has_prior = True
+            wexp = 1.0 / math.sqrt(1.0 - sb * sb)
+            rho = (sig / sig_r) ** 2
+    return True, w, res, wts
 
 
 def _disc_template(radius: float) -> F32:
@@ -585,7 +711,14 @@ class BallDetector:
         r = np.asarray(centre_radius, float)
         if a.ndim != 1 or a.shape != r.shape or a.size < 8 or np.any(np.diff(a) <= 0):
             raise ValueError("track: increasing ball angles and radii of the same length")
-        self._track = (a, r)
+        # the periodic table np.interp(..., period=2 pi) builds on every call, built once:
+        # angles reduced to [0, 2 pi), sorted, one point wrapped onto either end
+        two_pi = 2.0 * math.pi
+        red = a % two_pi
+        order = np.argsort(red, kind="stable")
+        red, rr = red[order], r[order]
+        self._track = (np.concatenate((red[-1:] - two_pi, red, red[:1] + two_pi)),
+                       np.concatenate((rr[-1:], rr, rr[:1])))
 
     def _off_track(self, fit: _Fit) -> str:
         """Why a fit is not the ball on its track (empty: it may be)."""
@@ -594,7 +727,7 @@ class BallDetector:
         x, y = float(fit.world[0]), float(fit.world[1])
         a, r = self._track
         psi = self._gate_theta + math.atan2(x, y)
-        expect = float(np.interp(psi, a, r, period=2.0 * math.pi))
+        expect = float(np.interp(psi % (2.0 * math.pi), a, r))
         dr = math.hypot(x, y) - expect
         if abs(dr) > self.config.track_gate:
             return (f"object {1e3 * dr:+.0f} mm off the ball's track (gate "
@@ -933,52 +1066,12 @@ class BallDetector:
         v[:, 2] = 1.0
         v[:, :3] *= (1.0 / np.sqrt(xy[:, 0] ** 2 + xy[:, 1] ** 2 + 1.0))[:, None]
         v[:, 3] = 1.0
-        v3 = v[:, :3]
-        res = np.zeros(n)
-        w = np.zeros(3)
-        scale = sig = 1.0
-        prior: tuple[float, float, float, float, float] | None = None
-        rwc = self._rwc
-        cz, zb, rb = float(cam.c[2]), self._z, self.ball_radius
-        for it in range(iters):
-            g = (v3 * wts[:, None]).T @ v
-            if prior is not None:
-                hx, hy, hz, wexp, rho = prior
-                g[:, :3] += rho * np.array([[hx * hx, hx * hy, hx * hz],
-                                            [hy * hx, hy * hy, hy * hz],
-                                            [hz * hx, hz * hy, hz * hz]])
-                g[:, 3] += (rho * wexp) * np.array([hx, hy, hz])
-            sol = _solve3(g[:, :3], g[:, 3])
-            if sol is None:
-                return None
-            wx, wy, wz = sol
-            nw2 = wx * wx + wy * wy + wz * wz
-            if nw2 <= 1.0:
-                return None
-            w = np.array(sol)
-            tb = math.sqrt(nw2 - 1.0)  # tan(beta)
-            # residual ~ tan(beta) (beta - gamma_i); in pixels
-            res = (v3 @ w - 1.0) * (self._focal / tb)
-            if it < 2:  # robust scale from the median absolute residual (first two rounds)
-                sig = max(1.4826 * _median(np.abs(res[wts > 0])), 0.08)
-                scale = 4.685 * sig
-            u = np.maximum(1.0 - (res * (1.0 / scale)) ** 2, 0.0)
-            wts = u * u
-            if it == iters - 1:
-                break
-            if np.count_nonzero(wts) < 3:
-                return None
-            # radius prior for the next round, linearised at this solution
-            nw = math.sqrt(nw2)
-            hx, hy, hz = wx / nw, wy / nw, wz / nw
-            dz = rwc[2][0] * hx + rwc[2][1] * hy + rwc[2][2] * hz
-            lam = (zb - cz) / dz if abs(dz) > 1e-12 else -1.0
-            if lam > rb:
-                sb = rb / lam
-                sig_r = max(self.config.radius_prior_sigma * self._focal * sb, 1e-3)
-                # data rows: residual ~ tan(beta) e_px / f; prior row: ~ tan(beta) dr_px / f
-                prior = (hx, hy, hz, 1.0 / math.sqrt(1.0 - sb * sb), (sig / sig_r) ** 2)
-        return w, res, wts
+        rz = self._rwc[2]
+        ok, w, res, wts = _cone_kernel(v, np.asarray(wts, dtype=float), int(iters),
+                                       self._focal, rz[0], rz[1], rz[2], float(cam.c[2]),
+                                       self._z, self.ball_radius,
+                                       float(self.config.radius_prior_sigma))
+        return (w, res, wts) if ok else None
 
     def _refine(self, gray: np.ndarray, scale: float, u0: float, v0: float) -> _Fit:
         """Sub-pixel centre of the candidate at (u0, v0), with verification."""
