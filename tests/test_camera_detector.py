@@ -404,3 +404,14 @@ def test_track_gate_table_is_numpy_periodic_interp() -> None:
     for psi in rng.uniform(-30, 30, 2000):
         assert np.interp(psi % (2 * np.pi), ta, tr) == pytest.approx(
             np.interp(psi, a, r, period=2 * np.pi), abs=1e-15)
+
+
+def test_warm_up_runs_the_detector_and_forgets_its_disc(scene) -> None:  # noqa: ANN001
+    det = BallDetector(CAM, scene.ball_radius)
+    assert det.warm_up() > 0.0
+    assert det.last_fix is None  # the synthetic disc is not a fix of the run
+    img, theta, centre = next(_frames(scene, RenderOptions(), 1, seed=5))
+    d = det.detect(img, theta)
+    assert d.status == DetectionStatus.FOUND and d.search == "full"
+    truth = CAM.project(centre)
+    assert math.hypot(d.u - truth[0], d.v - truth[1]) < 0.2

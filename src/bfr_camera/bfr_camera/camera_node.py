@@ -187,6 +187,7 @@ class CameraNode(Node):
               f"{what}: pass --params-file <bfr_model>/config/rig.yaml or -p ball.radius:=<m>")
         self.track = ball_track(params_from_dict({k: p[k] for k in RIG_GROUPS if k in p}))
         self.detector = self._make_detector(self.camera)
+        warm = self.detector.warm_up()  # the compiled kernels loaded now, not at the 1st fix
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])
         self.joint_name = str(inp["joint_name"])
@@ -233,7 +234,8 @@ class CameraNode(Node):
         self.get_logger().info(
             f"camera: images {self.image_sub.topic_name}, ball radius "
             f"{1e3 * self.ball_radius:.1f} mm, ROI "
-            f"{'on' if self.detector_config.use_roi else 'off'}, pose "
+            f"{'on' if self.detector_config.use_roi else 'off'}, detector warmed up in "
+            f"{1e3 * warm:.0f} ms, pose "
             f"{[round(v, 4) for v in self.camera_params['position']]} m; {calib}")
 
     def _make_detector(self, cam: CameraModel) -> BallDetector:
