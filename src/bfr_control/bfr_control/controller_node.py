@@ -70,6 +70,7 @@ from bfr_ros.node_common import (
     STATE_QOS,
     CdrError,
     PolledSubscription,
+    Throttle,
     declare_parameter_tree,
     format_published,
     load_yaml_parameters,
@@ -100,6 +101,7 @@ from bfr_interfaces.msg import ControllerState
 __all__ = ["ControllerNode", "main", "node_defaults"]
 
 _NS = 1_000_000_000
+_PAUSE_S = 0.03  # [s] wall time between observations worth a warning (6 frames at 200 Hz)
 MODE_CODES = {WAITING: ControllerState.WAITING, ROLLING: ControllerState.ROLLING,
               BALL_LOST: ControllerState.BALL_LOST}
 _RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
@@ -208,6 +210,11 @@ class ControllerNode(Node):
         self.stats = {"steps": 0, "observations": 0, "rolling_steps": 0, "faults": 0,
                       "saturated": 0, "exceptions": 0, "commands": 0, "states": 0}
         self.executor_ref: Any = None
+        self.throttle = Throttle()
+        self.obs_wall: float | None = None  # wall clock and thread CPU at the last observation
+        self.obs_cpu = 0.0
+        self.pauses = 0
+        self.worst_pause = (0.0, 0.0)  # (wall [s], CPU of this thread meanwhile [s])
         self.get_logger().info(
             f"controller: {self.js_sub.topic_name} + {self.obs_sub.topic_name} -> "
             f"{self.cmd_pub.topic_name}, trigger {self.trigger}, torque limit {self.limit:g} "
@@ -325,6 +332,7 @@ class ControllerNode(Node):
 
     @guarded("ball_observation")
     def _on_ball(self, msg: BallObservationMsg) -> None:
+        self._watch_pause()
         self.take_joints()  # the encoder samples that arrived before this observation
         self.stats["observations"] += 1
         t_ns = stamp_to_ns(msg.header.stamp)
@@ -335,6 +343,28 @@ class ControllerNode(Node):
         if self.trigger == "observation" and self.js is not None and self.js[0] >= t_ns \
                 and (not self.fault or self.exception_fault):
             self._step()
+
+    def _watch_pause(self) -> None:
+        """Note a pause in the observations (wall clock) and whether this node was busy.
+
+        A pause of ``_PAUSE_S`` or more between two observation callbacks is logged
+        (throttled) with the CPU time this thread used meanwhile: little CPU means the
+        observations did not come (camera, transport) or the node was not scheduled (a busy
+        machine); much means the node itself was busy. The longest pause is in the exit log.
+        """
+        wall, cpu = time.monotonic(), time.thread_time()
+        if self.obs_wall is not None:
+            gap, used = wall - self.obs_wall, cpu - self.obs_cpu
+            if gap >= _PAUSE_S:
+                self.pauses += 1
+                if gap > self.worst_pause[0]:
+                    self.worst_pause = (gap, used)
+                if self.throttle("pause", 5.0):
+                    self.get_logger().warn(
+                        f"no observation for {1e3 * gap:.0f} ms of wall time (this node used "
+                        f"{1e3 * used:.1f} ms of CPU meanwhile: "
+                        f"{'busy itself' if used > 0.5 * gap else 'waiting or not scheduled'})")
+        self.obs_wall, self.obs_cpu = wall, cpu
 
     @guarded("timer")
     def _on_timer(self) -> None:
@@ -497,7 +527,9 @@ class ControllerNode(Node):
             f"saturated), {s['observations']} observations, {s['faults']} fault(s), "
             f"{s['exceptions']} exception(s); gate: {est.rejected['radial']} + "
             f"{est.rejected['innovation']} fixes rejected, restarts {est.restarts}; {delay}; "
-            f"zero torque published on exit")
+            f"pauses between observations >= {1e3 * _PAUSE_S:.0f} ms of wall time: "
+            f"{self.pauses} (longest {1e3 * self.worst_pause[0]:.0f} ms, "
+            f"{1e3 * self.worst_pause[1]:.1f} ms CPU); zero torque published on exit")
         self.get_logger().info(format_published({self.cmd_pub.topic_name: s["commands"] + 1,
                                                  self.state_pub.topic_name: s["states"]}))
         if isinstance(self.js_sub, PolledSubscription):
