@@ -18,6 +18,14 @@ effect named) with its Wilson 95 % interval, and per model structure (rigid, con
 
 Wilson interval (Wilson 1927) of ``k`` successes in ``n``, ``z = 1.96``:
 ``(p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)``, ``p = k/n``.
+
+**Detection beyond chance** per mechanism (informedness, Youden's J; Youden 1950): the
+detection rate over the cases that conceal ``e`` minus the rate at which the tool names
+``e`` on the clean cases, ``J = p_1 - p_0``. A tool that names ``e`` on every case "finds"
+it every time and has ``J = 0``; the raw found counts reward that, ``J`` does not. Its 95 %
+interval is Newcombe's hybrid score interval for a difference of independent proportions
+(Newcombe 1998, method 10), from the Wilson intervals ``[l_i, u_i]`` of both:
+``J - sqrt((p_1 - l_1)^2 + (u_0 - p_0)^2)`` to ``J + sqrt((u_1 - p_1)^2 + (p_0 - l_0)^2)``.
 """
 
 from __future__ import annotations
@@ -34,8 +42,8 @@ from numpy.typing import NDArray
 from bfr_diagnose.effects import EFFECT_NAMES
 from bfr_diagnose.limits.cases import FLOOR
 
-__all__ = ["TOOLS", "detection_curve", "load_records", "logistic_fit", "summarise",
-           "wilson", "write_report"]
+__all__ = ["TOOLS", "detection_curve", "load_records", "logistic_fit", "newcombe_difference",
+           "summarise", "wilson", "write_report"]
 
 TOOLS = ("bfr", "peer")
 _GENERATORS = ("rigid", "contact", "nodes")
@@ -54,6 +62,22 @@ def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
     lo = 0.0 if k == 0 else max(0.0, (mid - half) / den)
     hi = 1.0 if k == n else min(1.0, (mid + half) / den)
     return lo, hi
+
+
+def newcombe_difference(k1: int, n1: int, k0: int, n0: int, z: float = Z95
+                        ) -> tuple[float, float, float]:
+    """``(p1 - p0, lo, hi)``: a difference of two proportions and its 95 % interval.
+
+    Newcombe's hybrid score interval (module docstring); NaN if either ``n`` is 0.
+    """
+    if n1 <= 0 or n0 <= 0:
+        return float("nan"), float("nan"), float("nan")
+    p1, p0 = k1 / n1, k0 / n0
+    l1, u1 = wilson(k1, n1, z)
+    l0, u0 = wilson(k0, n0, z)
+    d = p1 - p0
+    return (d, d - math.sqrt((p1 - l1) ** 2 + (u0 - p0) ** 2),
+            d + math.sqrt((u1 - p1) ** 2 + (p0 - l0) ** 2))
 
 
 def logistic_fit(x: NDArray[np.float64], y: NDArray[np.float64], iters: int = 50
@@ -170,7 +194,9 @@ def _tool_summary(rows: list[dict[str, Any]], tool: str, n_boot: int,
         hit = np.array([e in _found(r, tool) for r in sub])
         m = detection_curve(x, hit, n_boot, rng)
         m["detection"] = _rate(list(hit))
-        m["false_positive_clean"] = _rate([e in _found(r, tool) for r in clean])
+        m["false_positive_clean"] = fp = _rate([e in _found(r, tool) for r in clean])
+        j, j_lo, j_hi = newcombe_difference(int(hit.sum()), len(hit), fp["k"], fp["n"])
+        m["informedness"] = {"rate": j, "lo": j_lo, "hi": j_hi}
         errs = np.array([r.get(f"{tool}_err_{e}", np.nan) for r in sub], float)
         ok = hit & np.isfinite(errs)
         m["param_error_median"] = float(np.median(errs[ok])) if ok.any() else float("nan")
@@ -280,7 +306,27 @@ def report_markdown(summary: dict[str, Any]) -> str:
             f"{_size_text(e, mb, 'x90')} | {pe(mb)} | {mp['hits']}/{mp['n']} | "
             f"{_size_text(e, mp, 'x50')} | {_size_text(e, mp, 'x90')} | {pe(mp)} | "
             f"{_pct(mp['false_positive_clean'])} |")
+    lines += ["", "Per mechanism, detection beyond chance (informedness J = found rate minus the "
+              "rate the tool names the mechanism on clean cases; Newcombe 95 % intervals; a "
+              "tool that names a mechanism on every case has J = 0):", "",
+              "| mechanism | bfr: found | bfr: named on clean | bfr: J | peer: found | "
+              "peer: named on clean | peer: J |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    for e in EFFECT_NAMES:
+        if e not in b["mechanisms"]:
+            continue
+        mb, mp = b["mechanisms"][e], p["mechanisms"][e]
+        lines.append(
+            f"| {e} | {_pct(mb['detection'])} | {_pct(mb['false_positive_clean'])} | "
+            f"{_diff(mb['informedness'])} | {_pct(mp['detection'])} | "
+            f"{_pct(mp['false_positive_clean'])} | {_diff(mp['informedness'])} |")
     return "\n".join(lines)
+
+
+def _diff(r: dict[str, Any]) -> str:
+    """A difference of proportions in percentage points with its interval."""
+    if math.isnan(r["rate"]):
+        return "n/a"
+    return f"{100 * r['rate']:+.0f} [{100 * r['lo']:+.0f}, {100 * r['hi']:+.0f}]"
 
 
 def write_table(out: Path, rows: list[dict[str, Any]]) -> list[Path]:
