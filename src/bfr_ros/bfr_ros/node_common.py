@@ -55,6 +55,7 @@ __all__ = [
     "IMAGE_SUB_QOS",
     "JOINT_STATES_POLLED_QOS",
     "JOINT_STATES_QOS",
+    "STATE_PUB_QOS",
     "STATE_QOS",
     "CdrError",
     "PolledSubscription",
@@ -105,6 +106,16 @@ COMMAND_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
 STATE_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
+#: The simulator's joint_states, camera_info and sim_truth publishers: as STATE_QOS with a
+#: deeper history. A reliable reader that missed a sample (a recorder's DDS thread held up
+#: on a busy machine) gets it repaired only while the writer still keeps it: keep last 100
+#: was 0.17 s of joint_states at 600 Hz, and the recorder lost samples repaired later than
+#: that (docs/notes/issue-17.md); 1000 keeps 1-5 s. Only for topics whose control-loop
+#: readers are best effort: a reliable reader delivers in order, so a deep history would
+#: let one missed sample hold back a controller's fresh ones for longer.
+STATE_PUB_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                           reliability=ReliabilityPolicy.RELIABLE,
+                           durability=DurabilityPolicy.VOLATILE)
 #: joint_states subscriptions: best effort, which matches reliable publishers (ros2_control's
 #: joint_state_broadcaster, the simulator) and best-effort ones alike.
 JOINT_STATES_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,

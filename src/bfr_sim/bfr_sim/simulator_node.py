@@ -72,6 +72,7 @@ from bfr_ros.node_common import (
     CLOCK_QOS,
     COMMAND_QOS,
     IMAGE_QOS,
+    STATE_PUB_QOS,
     STATE_QOS,
     declare_parameter_tree,
     flatten,
@@ -339,11 +340,11 @@ class SimulatorNode(Node):
             setattr(self.info_msg, key, info[key])
         self.info_msg.header.frame_id = info["frame_id"]
         # publishers and subscriptions (relative names: remappable, namespaceable)
-        # reliable, keep last 100: a recorder that falls a few ms behind loses nothing
-        self.js_pub = self.create_publisher(JointState, "joint_states", STATE_QOS)
+        self.js_pub = self.create_publisher(JointState, "joint_states", STATE_PUB_QOS)
         self.img_pub = self.create_publisher(Image, "camera/image_raw", IMAGE_QOS)
-        self.info_pub = self.create_publisher(CameraInfo, "camera/camera_info", IMAGE_QOS)
-        self.truth_pub = self.create_publisher(SimTruth, "sim_truth", STATE_QOS)
+        # camera_info as the state topics (small): a recorder's missed sample stays repairable
+        self.info_pub = self.create_publisher(CameraInfo, "camera/camera_info", STATE_PUB_QOS)
+        self.truth_pub = self.create_publisher(SimTruth, "sim_truth", STATE_PUB_QOS)
         self.clock_pub = self.create_publisher(Clock, "/clock", CLOCK_QOS)
         mk = p["markers"]  # the scene for Foxglove / RViz (bfr_model.scene); rate 0: off
         self.markers = MarkerPublisher(self, "sim_markers", float(mk["rate"]), str(mk["frame_id"]))
