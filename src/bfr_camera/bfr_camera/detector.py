@@ -568,7 +568,8 @@ def _cone_kernel(v, wts, iters, focal, rz0, rz1, rz2, cz, zb, rb,  # noqa: ANN00
     scale = 1.0
     sig = 1.0
     has_prior = False
-    hx = hy = hz = wexp = rho = 0.0
+    h = np.zeros(3)
+    wexp = rho = 0.0
     for it in range(iters):
         g = np.zeros((3, 4))
         for i in range(n):
@@ -577,19 +578,11 @@ def _cone_kernel(v, wts, iters, focal, rz0, rz1, rz2, cz, zb, rb,  # noqa: ANN00
                 va = v[i, a] * wi
                 for b in range(4):
                     g[a, b] += va * v[i, b]
-        if has_prior:
-            g[0, 0] += rho * hx * hx
-            g[0, 1] += rho * hx * hy
-            g[0, 2] += rho * hx * hz
-            g[1, 0] += rho * hy * hx
-            g[1, 1] += rho * hy * hy
-            g[1, 2] += rho * hy * hz
-            g[2, 0] += rho * hz * hx
-            g[2, 1] += rho * hz * hy
-            g[2, 2] += rho * hz * hz
-            g[0, 3] += rho * wexp * hx
-            g[1, 3] += rho * wexp * hy
-            g[2, 3] += rho * wexp * hz
+        if has_prior:  # rho h h^T and rho W h, h the unit axis of the last round
+            for a in range(3):
+                for b in range(3):
+                    g[a, b] += rho * h[a] * h[b]
+                g[a, 3] += rho * wexp * h[a]
         ok, wx, wy, wz = _solve3_k(g)
         if not ok:
             return False, w, res, wts
@@ -623,10 +616,11 @@ def _cone_kernel(v, wts, iters, focal, rz0, rz1, rz2, cz, zb, rb,  # noqa: ANN00
             return False, w, res, wts
         # radius prior for the next round, linearised at this solution
         nw = math.sqrt(nw2)
-        hx, hy, hz = wx / nw, wy / nw, wz / nw
-        dz = rz0 * hx + rz1 * hy + rz2 * hz
+        ux, uy, uz = wx / nw, wy / nw, wz / nw
+        dz = rz0 * ux + rz1 * uy + rz2 * uz
         lam = (zb - cz) / dz if abs(dz) > 1e-12 else -1.0
         if lam > rb:
+            h[0], h[1], h[2] = ux, uy, uz
             sb = rb / lam
             sig_r = max(prior_sigma * focal * sb, 1e-3)
             # data rows: residual ~ tan(beta) e_px / f; prior row: ~ tan(beta) dr_px / f
