@@ -38,6 +38,15 @@ that explains nearly as much as the winner and correlates beyond 0.9 with it (or
 nothing), and any physics parameter correlating beyond 0.9 with a sensor parameter (e.g.
 the contour's radius with the camera's scale), are reported instead of guessed.
 
+Calibration prior. The camera's offset, rotation and scale carry a Gaussian prior about
+the nominal (widths ``sigma_j``, :data:`~bfr_diagnose.effects.CAMERA_PRIOR`, times
+``prior_scale``): a MAP estimate, one extra residual row per parameter and part,
+``r_j = sqrt(tau) (x_j - x_j0) / sigma_j``, appended to the training rows the optimiser sees
+(never to the held-out cost). The data rows are weighted to unit variance and correlated over
+``tau`` samples (:func:`effective_samples`), so they carry ``sum w^2 / tau`` of
+log-likelihood; the ``sqrt(tau)`` puts the prior on the same footing, and a parameter the
+data do not fix gets back its prior width in the intervals below.
+
 Intervals. ``cov = s^2 (J^T J)^-1 tau`` at the optimum, 95 % intervals ``+- 1.96 sqrt(diag)``.
 With several recordings, :func:`between_recordings` fits every selected effect on each
 recording alone and widens the joint interval by the spread between them.
@@ -70,7 +79,7 @@ from bfr_diagnose.preprocess import SensorCorrection
 from bfr_diagnose.residual import ResidualEvaluator
 
 __all__ = ["Fit", "LinearScreen", "Part", "Problem", "Selection", "autocorr_time",
-           "between_recordings", "linear_gain", "select_effects"]
+           "between_recordings", "effective_samples", "linear_gain", "select_effects"]
 
 FloatArray = NDArray[np.float64]
 Chosen = list[tuple[Effect, FloatArray]]
@@ -234,11 +243,18 @@ class Problem:
         The recordings.
     base : RigParams
         Nominal parameters.
+    prior_scale : float
+        Every calibration prior's width times this (0: no prior; module docstring).
     """
 
-    def __init__(self, parts: list[Part], base: RigParams) -> None:
+    def __init__(self, parts: list[Part], base: RigParams, prior_scale: float = 1.0
+                 ) -> None:
+        if not (math.isfinite(prior_scale) and prior_scale >= 0.0):
+            raise ValueError(f"prior_scale must be a number >= 0, got {prior_scale!r}")
         self.parts = parts
         self.base = base
+        self.prior_scale = prior_scale
+        self.prior_tau = 1.0     # [samples] the residual's correlation (module docstring)
         self.m_ref = base.ball.mass
         self.n_eval = 0
         self._jac_cache: dict[tuple, Any] = {}
@@ -301,6 +317,11 @@ class Problem:
                 level = 1.4826 * float(np.median(np.abs(x)))
                 p.sigma[r - 1] = max(float(p.sigma_null[r - 1]), level)
         self._jac_cache.clear()
+
+    def prior_width(self, name: str) -> float | None:
+        """The calibration prior's width of a sensor parameter (None: no prior)."""
+        w = sensor_param(name).prior
+        return None if w is None or self.prior_scale == 0.0 else w * self.prior_scale
 
     # -- evaluation ----------------------------------------------------------------------
     def part_weighted(self, i: int, chosen: Chosen, sensor: FloatArray) -> FloatArray:
@@ -460,7 +481,9 @@ class Problem:
         ke = x0e.size
         cuts = np.cumsum([e.k for e in effs])[:-1] if effs else []
         ub = (hi - x0) / scales
-        fitter = _Fitter(self, effs, cuts, snames, sensors0, parts, x0, scales, ke, ub)
+        prior = _prior_rows([self.prior_width(n) for _, n in snames], [n for _, n in snames],
+                            self.prior_tau, x0, scales, ke)
+        fitter = _Fitter(self, effs, cuts, snames, sensors0, parts, x0, scales, ke, ub, prior)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", OptimizeWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -478,7 +501,7 @@ class Problem:
         cov = None
         jac = sol.jac
         n = jac.shape[0]
-        s2 = 2.0 * sol.cost / max(n - x0.size, 1)
+        s2 = float(np.sum(sol.fun[:fitter.size] ** 2)) / max(n - prior.cols.size - x0.size, 1)
         try:
             cov = _covariance(jac, s2, scales)
         except (np.linalg.LinAlgError, ValueError):
@@ -515,16 +538,59 @@ def _covariance(jac: FloatArray, s2: float, scales: FloatArray) -> FloatArray:
     return cov
 
 
+@dataclass(frozen=True, kw_only=True)
+class _Prior:
+    """The calibration prior's rows of one fit: ``r = a + B xn`` (module docstring).
+
+    ``cols`` are the columns of the fit's normalised vector ``xn`` that carry a prior,
+    ``a`` the rows at ``xn = 0`` and ``b`` each row's slope (``sqrt(tau) scale / sigma``).
+    """
+
+    cols: NDArray[np.int_]
+    a: FloatArray
+    b: FloatArray
+
+    def rows(self, xn: FloatArray) -> FloatArray:
+        """The prior's residual rows at ``xn``."""
+        return self.a + self.b * xn[self.cols]
+
+
+def _prior_rows(widths: list[float | None], names: list[str], tau: float, x0: FloatArray,
+                scales: FloatArray, ke: int) -> _Prior:
+    """The prior rows of a fit's sensor parameters ``names`` (columns ``ke`` on).
+
+    Row ``r_j = sqrt(tau) (x_j - x_j0) / sigma_j`` with ``x_j = x0_j + xn_j scale_j``,
+    ``x_j0`` the parameter's nominal (no correction, :class:`SensorCorrection`'s default)
+    and ``sigma_j`` its width (``widths``; None: no prior row).
+    """
+    default = SensorCorrection()
+    cols, a, b = [], [], []
+    root = math.sqrt(max(tau, 1.0))
+    for k, (name, width) in enumerate(zip(names, widths, strict=True)):
+        if width is None:
+            continue
+        c = ke + k
+        cols.append(c)
+        a.append(root * (x0[c] - float(getattr(default, name))) / width)
+        b.append(root * scales[c] / width)
+    return _Prior(cols=np.array(cols, int), a=np.array(a, float), b=np.array(b, float))
+
+
 class _Fitter:
-    """The residual and its part-wise Jacobian of one joint fit (:meth:`Problem.fit`)."""
+    """The residual and its part-wise Jacobian of one joint fit (:meth:`Problem.fit`).
+
+    The residual is the parts' training rows followed by the calibration prior's rows.
+    """
 
     def __init__(self, prob: Problem, effs: list[Effect], cuts: Any,
                  snames: list[tuple[int, str]], sensors0: list[FloatArray], parts: list[int],
-                 x0: FloatArray, scales: FloatArray, ke: int, ub: FloatArray) -> None:
+                 x0: FloatArray, scales: FloatArray, ke: int, ub: FloatArray,
+                 prior: _Prior) -> None:
         self.prob, self.effs, self.cuts, self.snames = prob, effs, cuts, snames
         self.sensors0, self.parts, self.x0, self.scales, self.ke = (sensors0, parts, x0,
                                                                     scales, ke)
         self.ub = ub
+        self.prior = prior
         self.mask = np.concatenate([prob.train[prob.part_slice(i)] for i in parts])
         self.size = int(self.mask.sum())
         self._last: tuple[FloatArray, list[FloatArray]] | None = None
@@ -547,18 +613,21 @@ class _Fitter:
             ws = self._parts(chosen, sensors, self.parts)
         except _BAD:
             self._last = None
-            return np.full(self.size, 1e3)
+            return np.concatenate([np.full(self.size, 1e3), self.prior.rows(xn)])
         w = np.concatenate(ws)[self.mask]
         if not np.all(np.isfinite(w)):
             w = np.where(np.isfinite(w), w, 0.0)
         self._last = (np.array(xn), ws)
-        return w
+        return np.concatenate([w, self.prior.rows(xn)])
 
     def jac(self, xn: FloatArray) -> FloatArray:
         if self._last is None or not np.array_equal(self._last[0], xn):
             self.fun(xn)
+        n_prior = self.prior.cols.size
+        jp = np.zeros((n_prior, xn.size))
+        jp[np.arange(n_prior), self.prior.cols] = self.prior.b
         if self._last is None:
-            return np.zeros((self.size, xn.size))
+            return np.vstack([np.zeros((self.size, xn.size)), jp])
         base = self._last[1]
         lens = [b.size for b in base]
         offs = np.concatenate([[0], np.cumsum(lens)]).astype(int)
@@ -582,7 +651,7 @@ class _Fitter:
                     continue
                 J[offs[k]:offs[k + 1], col] = (w - base[k]) / step
         J[~np.isfinite(J)] = 0.0
-        return J[self.mask]
+        return np.vstack([J[self.mask], jp])
 
     def _effect_of(self, col: int) -> Effect:
         edges = np.concatenate([[0], np.cumsum([e.k for e in self.effs])])
@@ -783,6 +852,7 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
     sensors = [np.array(s, float) for s in sensors0]
     c_tr, c_te, w = prob.cost(chosen, sensors)
     tau, n_eff = effective_samples(prob, w, tau_noise)
+    prob.prior_tau = tau
     stages: list[dict[str, Any]] = []
     confounded: list[dict[str, Any]] = []
     final = Fit(effects=[], values=[], sensors=sensors, cost_train=c_tr, cost_test=c_te)
@@ -792,6 +862,7 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
             chosen, sensors = _refit(prob, chosen, sensors)
             c_tr, c_te, w = prob.cost(chosen, sensors)
             tau, n_eff = effective_samples(prob, w, tau_noise)
+            prob.prior_tau = tau
         st = _Stage(index=index, chosen=chosen, sensors=sensors, cost_train=c_tr,
                     cost_test=c_te, w=w, n_eff=n_eff)
         rows, fits = _assess_candidates(prob, st, cands, crit, progress)
@@ -1182,9 +1253,14 @@ def sensor_table(prob: Problem, fit: Fit, tau: float) -> list[dict[str, Any]]:
     """Each part's fitted sensor model with 95 % intervals.
 
     ``at_bound`` is the bound a value ran to (within 0.1 % of its range), else None: such a
-    value is not identified by the recording (:func:`bfr_diagnose.api` notes it).
+    value is not identified by the recording (:func:`bfr_diagnose.api` notes it). A
+    parameter with a calibration prior has ``prior`` (its nominal and width), ``pull``
+    (``(value - nominal) / width``: beyond 2 the data moved it against the prior) and
+    ``posterior_over_prior`` (its posterior sd over the prior's width: near 1 the data say
+    nothing about it, the prior holds it; well under 1 the data fix it).
     """
     out = []
+    default = SensorCorrection()
     j = fit.n_params
     for p, vals in zip(prob.parts, fit.sensors, strict=True):
         for name, v in zip(p.sensor_names, vals, strict=True):
@@ -1195,9 +1271,16 @@ def sensor_table(prob: Problem, fit: Fit, tau: float) -> list[dict[str, Any]]:
             margin = 1e-3 * (sp.upper - sp.lower)
             bound = (sp.lower if v - sp.lower <= margin else
                      sp.upper if sp.upper - v <= margin else None)
-            out.append({"recording": p.name, "name": name, "unit": sp.unit, "value": float(v),
-                        "ci95": [float(v - 1.96 * sd), float(v + 1.96 * sd)], "std": sd,
-                        "description": sp.description, "at_bound": bound})
+            row = {"recording": p.name, "name": name, "unit": sp.unit, "value": float(v),
+                   "ci95": [float(v - 1.96 * sd), float(v + 1.96 * sd)], "std": sd,
+                   "description": sp.description, "at_bound": bound, "prior": None}
+            width = prob.prior_width(name)
+            if width is not None:
+                nominal = float(getattr(default, name))
+                row.update(prior={"nominal": nominal, "width": width},
+                           pull=float((v - nominal) / width),
+                           posterior_over_prior=float(sd / width))
+            out.append(row)
             j += 1
     return out
 
