@@ -45,7 +45,15 @@ from bfr_diagnose.identify import (
     select_effects,
 )
 from bfr_diagnose.locate import ljung_box, locate, prediction_errors, rms_by_block
-from bfr_diagnose.null import NullCalibration, PartNoise, null_gains, part_noise, thresholds_of
+from bfr_diagnose.null import (
+    NullCalibration,
+    PartNoise,
+    null_gains,
+    null_part_gains,
+    part_noise,
+    part_thresholds_of,
+    thresholds_of,
+)
 from bfr_diagnose.preprocess import Piece, Prepared, PrepConfig, SensorCorrection, plan_parts
 from bfr_diagnose.residual import Residual, ResidualConfig, ResidualEvaluator
 
@@ -225,6 +233,7 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
     prob = Problem(parts, base, prior_scale=opts.camera_prior)
     noises, sensors0, null = _calibrate(prob, pieces, opts, say)
     sel = select_effects(prob, null.thresholds, sensors0, null.tau,
+                         part_thresholds=null.part_thresholds,
                          max_effects=opts.max_effects, only=opts.only, progress=say)
     suspects = _suspects(sel, base)
     corrected, _ = apply_effects(base, [(EFFECTS[n], v) for n, v in
@@ -303,8 +312,10 @@ def _calibrate(prob: Problem, pieces: list[list[Piece]], opts: DiagnoseOptions, 
     if opts.null:
         gains = null_gains(prob, noises, sensors0)
         thresholds = thresholds_of(gains)
+        part_thr = (part_thresholds_of(null_part_gains(prob, noises, sensors0))
+                    if len(prob.parts) > 1 else {})
     else:
-        gains, thresholds = {}, dict.fromkeys(EFFECTS, 0.05)
+        gains, thresholds, part_thr = {}, dict.fromkeys(EFFECTS, 0.05), {}
     null = NullCalibration(
         sigma=[n.sigma.tolist() for n in noises], gains=gains, thresholds=thresholds,
         tau=max(n.tau for n in noises), runs=min(len(n.draws) for n in noises),
@@ -315,7 +326,7 @@ def _calibrate(prob: Problem, pieces: list[list[Piece]], opts: DiagnoseOptions, 
                 "(x1.4), the processing's own resolution"
                 + ("" if opts.null else "; thresholds not computed (--no-null): 5 % gain")),
         rms_null=[[_rms(n.msq[r]) for r in range(3)] for n in noises],
-        msq=[n.msq for n in noises])
+        part_thresholds=part_thr, msq=[n.msq for n in noises])
     return noises, sensors0, null
 
 

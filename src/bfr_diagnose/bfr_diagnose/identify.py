@@ -22,6 +22,22 @@ is significant when its held-out gain exceeds the null's largest gain for that e
 (x1.25 + 0.02), ``dBIC < -6``, its joint fit is not degenerate, and it is larger than its
 engineering resolution (:data:`~bfr_diagnose.effects.MIN_SIZE`).
 
+Group test (several recordings). The pooled gain is a share of every recording's cost, so
+an effect that only some recordings can see (the friction's direction in the runs that turn
+both ways) is diluted by the others. The same joint fit is therefore also scored per
+recording: ``g_i = 1 - C_test,i(fit) / C_test,i(current)`` against that recording's own
+null threshold ``t_i`` (the null's fits scored on the recording alone, x1.25 + 0.02,
+:func:`~bfr_diagnose.null.null_part_gains`). The effect is significant in a group when the
+recordings ``S = {i: g_i > t_i}`` are not empty, the group's held-out gain (its costs
+pooled) exceeds the largest ``t_i`` of the group, the other recordings it enters are not
+made worse beyond the pooled threshold (their pooled gain ``> -t``), the BIC on the group's
+training cost falls (``dBIC_S = N_eff,S ln(C_train,S(fit) / C_train,S(current)) +
+k ln N_eff,S < -6``, with ``N_eff,S`` the group's share of the effective samples), and the
+fit is neither degenerate nor below its resolution. Each recording's test has the
+false-positive level of the pooled one (the same margin over its own null), and the BIC on
+the group guards against many small chance excesses. Candidates are fitted fully for it
+when one recording's linearised gain reaches half its threshold (:func:`_screen_parts`).
+
 Selection, greedy forward. Stage 0 fits the sensor model alone. At each stage every
 candidate gets one Gauss-Newton step on top of the chosen effects with the sensor model
 refitted with it (the linearised screening: the least-squares fit of the candidate's and
@@ -197,6 +213,8 @@ class Fit:
         Effect parameters fitted (without the sensors).
     ok : bool
         The fit evaluated everywhere.
+    part_costs : list of (float, float) or None
+        Each part's (training, held-out) cost (a fit on all parts).
     """
 
     effects: list[str]
@@ -207,6 +225,7 @@ class Fit:
     cov: FloatArray | None = None
     n_params: int = 0
     ok: bool = True
+    part_costs: list[tuple[float, float]] | None = None
 
     def chosen(self) -> Chosen:
         """``(Effect, values)`` pairs."""
@@ -341,6 +360,16 @@ class Problem:
         """(train cost, test cost, weighted residual vector)."""
         w = self.weighted(chosen, sensors)
         return (float(np.nansum(w[self.train] ** 2)), float(np.nansum(w[self.test] ** 2)), w)
+
+    def part_costs(self, w: FloatArray) -> list[tuple[float, float]]:
+        """Each part's (training, held-out) cost of a residual vector."""
+        out = []
+        for i in range(len(self.parts)):
+            sl = self.part_slice(i)
+            x = w[sl]
+            out.append((float(np.nansum(x[self.train[sl]] ** 2)),
+                        float(np.nansum(x[self.test[sl]] ** 2))))
+        return out
 
     def part_slice(self, i: int) -> slice:
         """Where part ``i`` sits in the residual vector."""
@@ -491,10 +520,13 @@ class Problem:
                                 bounds=((lo - x0) / scales, ub), method="trf",
                                 max_nfev=max_nfev, x_scale=1.0, ftol=1e-7, xtol=1e-7)
         chosen, sensors = fitter.unpack(sol.x)
+        part_costs = None
         try:
-            c_tr, c_te, _ = self.cost(chosen, sensors) if only_part is None else \
+            c_tr, c_te, w = self.cost(chosen, sensors) if only_part is None else \
                 self._part_cost(only_part, chosen, sensors)
             ok = math.isfinite(c_tr) and math.isfinite(c_te)
+            if only_part is None:
+                part_costs = self.part_costs(w)
         except _BAD:
             c_tr = c_te = math.inf
             ok = False
@@ -508,7 +540,7 @@ class Problem:
             cov = None
         return Fit(effects=[e.name for e, _ in chosen], values=[v for _, v in chosen],
                    sensors=sensors, cost_train=c_tr, cost_test=c_te, cov=cov, n_params=ke,
-                   ok=ok)
+                   ok=ok, part_costs=part_costs)
 
     def _part_cost(self, i: int, chosen: Chosen, sensors: list[FloatArray]
                    ) -> tuple[float, float, FloatArray]:
@@ -680,6 +712,7 @@ class _Criteria:
     screen_top: int
     screen_frac: float
     degenerate_corr: float
+    part_thresholds: dict[str, list[float | None]] = field(default_factory=dict)
 
     def threshold(self, name: str) -> float:
         """Held-out gain the effect ``name`` must exceed (0 when the null has none)."""
@@ -783,6 +816,24 @@ class LinearScreen:
         c_tr = float(np.sum((wt + self.D_s[tr] @ b_s + D_e[tr] @ b_e) ** 2))
         return (1.0 - c1 / c0 if c0 > 0 else 0.0), b_e, c_tr
 
+    def step(self, w: FloatArray, D_e: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The effect's step and the residual after it with the sensors refitted, everywhere.
+
+        Returns
+        -------
+        b_e : ndarray
+            The effect's step (unclipped).
+        r : ndarray
+            ``w + D_s b_s + D_e b_e`` on all rows (training and held-out).
+        """
+        w = np.where(np.isfinite(w), w, 0.0)
+        tr = self.train
+        E = self._perp(D_e[tr])
+        b_e = (np.linalg.lstsq(E, -self._perp(w[tr]), rcond=None)[0] if np.any(E)
+               else np.zeros(D_e.shape[1]))
+        b_s = self._sensor_step(-w[tr] - D_e[tr] @ b_e)
+        return b_e, w + self.D_s @ b_s + D_e @ b_e
+
     def best_column(self, w: FloatArray, cols: list[FloatArray]) -> int:
         """Index of the single column that lowers the training cost most.
 
@@ -811,7 +862,9 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
                    tau_noise: float, max_effects: int = 3, dbic_min: float = -6.0,
                    confound_corr: float = 0.9,
                    only: list[str] | None = None, progress: Any = None, screen_top: int = 2,
-                   screen_frac: float = 0.5, degenerate_corr: float = 0.995) -> Selection:
+                   screen_frac: float = 0.5, degenerate_corr: float = 0.995,
+                   part_thresholds: dict[str, list[float | None]] | None = None
+                   ) -> Selection:
     """Greedy forward selection of effects (module docstring).
 
     Parameters
@@ -843,10 +896,13 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
     degenerate_corr : float
         A joint fit is degenerate when a parameter ends at a bound its nominal value is not
         at, or two parameters of different effects correlate beyond this.
+    part_thresholds : dict, optional
+        Per effect, each recording's own null threshold (None where the effect does not
+        enter): the group test (module docstring). None or empty: no group test.
     """
     crit = _Criteria(thresholds=thresholds, dbic_min=dbic_min, confound_corr=confound_corr,
                      screen_top=screen_top, screen_frac=screen_frac,
-                     degenerate_corr=degenerate_corr)
+                     degenerate_corr=degenerate_corr, part_thresholds=part_thresholds or {})
     cands = [c for c in prob.candidates if only is None or c in only]
     chosen: Chosen = []
     sensors = [np.array(s, float) for s in sensors0]
@@ -961,6 +1017,53 @@ def _screen(prob: Problem, st: _Stage, names: list[str]) -> dict[str, tuple]:
     return out
 
 
+def _screen_parts(prob: Problem, st: _Stage, names: list[str], crit: _Criteria
+                  ) -> dict[str, list[float]]:
+    """Each recording's linearised held-out gain of each candidate (the group test's screen).
+
+    The pooled screen refits only the sensors, so an effect that shows in some recordings
+    only, against an effect already chosen (a torque offset beside the Coulomb friction the
+    one-way runs fitted), is screened at a gain near zero: its step is held back by the
+    recordings where it only competes with the chosen effect. Here the chosen effects'
+    columns are refitted with the sensors (a Gauss-Newton step of the joint fit) and the
+    held-out cost of that one step is scored per recording.
+    """
+    key = ("stage", st.index) if st.index else ("nominal",)
+    D_s = prob.sensor_jacobian(st.chosen, st.sensors, st.w, key=key)
+    cols = [D_s]
+    for k, (eff, v) in enumerate(st.chosen):
+        for j in range(eff.k):
+            h = float(eff.scales[j]) * (1.0 if v[j] + eff.scales[j] <= eff.upper[j] else -1.0)
+            x = np.array(v, float)
+            x[j] += h
+            moved = [*st.chosen[:k], (eff, x), *st.chosen[k + 1:]]
+            try:
+                col = (prob.weighted(moved, st.sensors) - st.w) / h
+            except _BAD:
+                col = np.zeros_like(st.w)
+            cols.append(np.where(np.isfinite(col), col, 0.0)[:, None])
+    D_a = np.hstack(cols)
+    cur = np.where(np.isfinite(st.w), st.w, 0.0)
+    screen = LinearScreen(D_a, prob.train, prob.test)
+    out = {}
+    for name in names:
+        eff = EFFECTS[name]
+        if name == "track_bumps" or name in st.chosen_names or not crit.part_thresholds.get(name):
+            continue
+        x0 = np.asarray(eff.start(prob.base), float)
+        D = prob.effect_jacobian(st.chosen, st.sensors, eff, x0, st.w, key=key)
+        _, step = screen.step(cur, D)
+        gains = []
+        for i in range(len(prob.parts)):
+            sl = prob.part_slice(i)
+            te = prob.test[sl]
+            c0 = float(np.sum(cur[sl][te] ** 2))
+            c1 = float(np.sum(step[sl][te] ** 2))
+            gains.append(1.0 - c1 / c0 if c0 > 0 else 0.0)
+        out[name] = gains
+    return out
+
+
 def _screen_bump(prob: Problem, st: _Stage, screen: LinearScreen, key: Any) -> tuple:
     """The best single bump on a grid of positions (linear in its height), by training cost."""
     cols = prob.bump_columns(st.chosen, st.sensors, st.w, key=key)
@@ -979,10 +1082,14 @@ def _assess_candidates(prob: Problem, st: _Stage, cands: list[str], crit: _Crite
     screened = _screen(prob, st, names)
     names = [n for n in names if n in screened]
     top = sorted(names, key=lambda n: -screened[n][1])[:crit.screen_top]
+    by_part = _screen_parts(prob, st, names, crit) if crit.part_thresholds else {}
     rows = []
     fits: dict[str, Fit] = {}
     for name in names:
-        full = name in top or screened[name][1] >= crit.screen_frac * crit.threshold(name)
+        full = (name in top or screened[name][1] >= crit.screen_frac * crit.threshold(name)
+                or any(t is not None and g >= crit.screen_frac * t for g, t in
+                       zip(by_part.get(name, []), crit.part_thresholds.get(name, []),
+                           strict=False)))
         row, fit = _assess(prob, st, name, screened[name], full, crit)
         if fit is not None:
             fits[name] = fit
@@ -1017,17 +1124,66 @@ def _assess(prob: Problem, st: _Stage, name: str, screened: tuple, full: bool,
         size = effect_size(name, vals0, prob.base)
     big = size >= MIN_SIZE.get(name, 0.0)
     why = plausibility(name, vals, prob.base)
+    pooled = bool(full and gain > thr and dbic < crit.dbic_min and degenerate is None and big)
+    group = (_group_test(prob, st, eff, fit, crit) if fit is not None and
+             crit.part_thresholds.get(name) else None)
+    by_group = bool(not pooled and group is not None and group["significant"]
+                    and degenerate is None and big)
     row = {"effect": name, "stage": st.index + 1, "heldout_gain": gain, "dbic": dbic,
            "plausible": why is None, "implausible_because": why,
            "threshold": thr,
-           "significant": bool(full and gain > thr and dbic < crit.dbic_min
-                               and degenerate is None and big),
+           "significant": pooled or by_group,
+           "significant_by": "all recordings" if pooled else "group" if by_group else None,
+           "group": group,
            "selected": False, "degenerate": degenerate,
            "size": size, "below_min_size": not big,
            "fit": "full" if full else "linearised (screened out)",
            "values": dict(zip(eff.names, map(float, vals), strict=True)),
            "units": dict(zip(eff.names, eff.units, strict=True))}
     return row, fit
+
+
+def _group_test(prob: Problem, st: _Stage, eff: Effect, fit: Fit, crit: _Criteria
+                ) -> dict[str, Any] | None:
+    """The group test of a full joint fit: per-recording gains and the group's BIC.
+
+    Module docstring (group test). None when the fit has no per-part costs.
+    """
+    if fit.part_costs is None or not fit.ok:
+        return None
+    thr = crit.part_thresholds[eff.name]
+    cur = prob.part_costs(st.w)
+    rows, group, rest = [], [], []
+    for i, (p, t) in enumerate(zip(prob.parts, thr, strict=True)):
+        if t is None or not p.affected_by(eff):
+            continue
+        g = 1.0 - fit.part_costs[i][1] / cur[i][1] if cur[i][1] > 0 else 0.0
+        rows.append({"recording": p.name, "gain": float(g), "threshold": float(t)})
+        (group if g > t else rest).append(i)
+    out: dict[str, Any] = {"recordings": [prob.parts[i].name for i in group],
+                           "per_recording": rows, "gain": None, "threshold": None,
+                           "gain_rest": None, "dbic": None, "significant": False}
+    if not group:
+        return out
+
+    def pooled_gain(idx: list[int]) -> float:
+        c0 = sum(cur[i][1] for i in idx)
+        return 1.0 - sum(fit.part_costs[i][1] for i in idx) / c0 if c0 > 0 else 0.0
+
+    g_grp = pooled_gain(group)
+    t_grp = max(float(thr[i]) for i in group)
+    g_rest = pooled_gain(rest) if rest else 0.0
+    n_all = int(np.sum(prob.train))
+    n_grp = sum(int(np.sum(prob.train[prob.part_slice(i)])) for i in group)
+    n_eff = st.n_eff * n_grp / max(n_all, 1)
+    c0 = sum(cur[i][0] for i in group)
+    c1 = sum(fit.part_costs[i][0] for i in group)
+    dbic = (n_eff * math.log(max(c1, 1e-300) / c0) + eff.k * math.log(max(n_eff, 2.0))
+            if c0 > 0 else math.inf)
+    out.update(gain=float(g_grp), threshold=t_grp, gain_rest=float(g_rest), dbic=float(dbic),
+               significant=bool(g_grp > t_grp and g_rest > -crit.threshold(eff.name)
+                                and dbic < crit.dbic_min))
+    return out
 
 
 def _describe(index: int, row: dict[str, Any]) -> str:
@@ -1037,6 +1193,9 @@ def _describe(index: int, row: dict[str, Any]) -> str:
             f"(null {row['threshold']:.4f}) dBIC {row['dbic']:+.1f}"
             + ("" if row["fit"] == "full" else " [linearised]")
             + (f" [degenerate: {row['degenerate']}]" if row["degenerate"] else "")
+            + (f" [significant in a group: {', '.join(row['group']['recordings'])}, dBIC "
+               f"{row['group']['dbic']:+.1f}]" if row.get("significant_by") == "group"
+               else "")
             + ("" if not row["below_min_size"]
                else f" [size {row['size']:.2g} below {MIN_SIZE[name]:g}]"))
 
@@ -1062,6 +1221,8 @@ def _ranking(stages: list[dict[str, Any]], cands: list[str]) -> list[dict[str, A
             "gain_at_selection": sel["heldout_gain"] if sel else None,
             "threshold_at_selection": sel["threshold"] if sel else None,
             "dbic_at_selection": sel["dbic"] if sel else None,
+            "significant_by": sel.get("significant_by") if sel else None,
+            "group_at_selection": sel.get("group") if sel else None,
             "values_at_selection": sel["values"] if sel else None})
     out.sort(key=lambda r: (not r["selected"], r["stage_selected"] or 0, -r["heldout_gain"]))
     return out
