@@ -30,7 +30,10 @@ null threshold ``t_i`` (the null's fits scored on the recording alone, x1.25 + 0
 :func:`~bfr_diagnose.null.null_part_gains`). The effect is significant in a group when the
 recordings ``S = {i: g_i > t_i}`` are not empty, the group's held-out gain (its costs
 pooled) exceeds the largest ``t_i`` of the group, the other recordings it enters are not
-made worse beyond the pooled threshold (their pooled gain ``> -t``), the BIC on the group's
+made worse beyond the pooled threshold (their pooled gain ``> -t``) and all of them together
+not at all (the pooled gain ``> 0``: an effect that only stands in for another one in a few
+recordings, a torque offset for the dry friction in runs that turn one way, is not taken),
+the BIC on the group's
 training cost falls (``dBIC_S = N_eff,S ln(C_train,S(fit) / C_train,S(current)) +
 k ln N_eff,S < -6``, with ``N_eff,S`` the group's share of the effective samples), and the
 fit is neither degenerate nor below its resolution. Each recording's test has the
@@ -1128,7 +1131,7 @@ def _assess(prob: Problem, st: _Stage, name: str, screened: tuple, full: bool,
     group = (_group_test(prob, st, eff, fit, crit) if fit is not None and
              crit.part_thresholds.get(name) else None)
     by_group = bool(not pooled and group is not None and group["significant"]
-                    and degenerate is None and big)
+                    and gain > 0.0 and degenerate is None and big)
     row = {"effect": name, "stage": st.index + 1, "heldout_gain": gain, "dbic": dbic,
            "plausible": why is None, "implausible_because": why,
            "threshold": thr,
