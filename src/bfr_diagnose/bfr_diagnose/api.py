@@ -41,10 +41,19 @@ from bfr_diagnose.identify import (
     Problem,
     Selection,
     between_recordings,
+    effective_samples,
     select_effects,
 )
 from bfr_diagnose.locate import ljung_box, locate, prediction_errors, rms_by_block
-from bfr_diagnose.null import NullCalibration, PartNoise, null_gains, part_noise, thresholds_of
+from bfr_diagnose.null import (
+    NullCalibration,
+    PartNoise,
+    null_gains,
+    null_part_gains,
+    part_noise,
+    part_thresholds_of,
+    thresholds_of,
+)
 from bfr_diagnose.preprocess import Piece, Prepared, PrepConfig, SensorCorrection, plan_parts
 from bfr_diagnose.residual import Residual, ResidualConfig, ResidualEvaluator
 
@@ -69,6 +78,7 @@ class DiagnoseOptions:
     null_seed: int = 0
     null: bool = True
     block: float | None = None          # [s] train/test block (default: duration / 8)
+    camera_prior: float = 1.0           # [-] the camera's calibration prior widths times this
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)
@@ -220,9 +230,10 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
     """:func:`diagnose_recordings` with BLAS on one thread (its docstring: Notes)."""
     t_start = time.perf_counter()
     parts, pieces, notes = _parts(recordings, opts, say)
-    prob = Problem(parts, base)
+    prob = Problem(parts, base, prior_scale=opts.camera_prior)
     noises, sensors0, null = _calibrate(prob, pieces, opts, say)
     sel = select_effects(prob, null.thresholds, sensors0, null.tau,
+                         part_thresholds=null.part_thresholds,
                          max_effects=opts.max_effects, only=opts.only, progress=say)
     suspects = _suspects(sel, base)
     corrected, _ = apply_effects(base, [(EFFECTS[n], v) for n, v in
@@ -295,13 +306,16 @@ def _calibrate(prob: Problem, pieces: list[list[Piece]], opts: DiagnoseOptions, 
     sensors0 = prob.fit([], None, None, prob.sensor_start(), max_nfev=60).sensors
     for _ in range(2):  # weights from the residual level, then the sensors again
         prob.reweight([], sensors0)
+        prob.prior_tau = effective_samples(prob, prob.cost([], sensors0)[2], 1.0)[0]
         sensors0 = prob.fit([], None, None, sensors0, max_nfev=40).sensors
     prob.reweight([], sensors0)
     if opts.null:
         gains = null_gains(prob, noises, sensors0)
         thresholds = thresholds_of(gains)
+        part_thr = (part_thresholds_of(null_part_gains(prob, noises, sensors0))
+                    if len(prob.parts) > 1 else {})
     else:
-        gains, thresholds = {}, dict.fromkeys(EFFECTS, 0.05)
+        gains, thresholds, part_thr = {}, dict.fromkeys(EFFECTS, 0.05), {}
     null = NullCalibration(
         sigma=[n.sigma.tolist() for n in noises], gains=gains, thresholds=thresholds,
         tau=max(n.tau for n in noises), runs=min(len(n.draws) for n in noises),
@@ -312,7 +326,7 @@ def _calibrate(prob: Problem, pieces: list[list[Piece]], opts: DiagnoseOptions, 
                 "(x1.4), the processing's own resolution"
                 + ("" if opts.null else "; thresholds not computed (--no-null): 5 % gain")),
         rms_null=[[_rms(n.msq[r]) for r in range(3)] for n in noises],
-        msq=[n.msq for n in noises])
+        part_thresholds=part_thr, msq=[n.msq for n in noises])
     return noises, sensors0, null
 
 
@@ -395,6 +409,34 @@ def _bound_notes(sel: Selection) -> list[str]:
             "the recording does not show it, e.g. a timing at constant speed, or it stands in "
             "for something the model lacks; then read the physics fitted beside it with "
             "care)." for r in sel.sensor_table if r.get("at_bound") is not None]
+
+
+def _prior_notes(sel: Selection, prior_scale: float) -> list[str]:
+    """Whether the camera's calibration prior was used, and where the data pulled against it.
+
+    A pull beyond 2 prior widths means the data moved a parameter well away from a
+    calibrated camera's (the model may lack something the camera's parameter stands in
+    for); a posterior width near the prior's means the data did not fix it (the prior did).
+    """
+    rows = [r for r in sel.sensor_table if r.get("prior")]
+    if not rows:
+        return ([] if prior_scale > 0.0 else
+                ["the camera's calibration prior was switched off (--camera-prior 0)."])
+    held = [f"{r['recording']} {r['name']}" for r in rows
+            if r["posterior_over_prior"] > 0.7]
+    out = ["the camera's offset, rotation and scale were fitted with a calibration prior "
+           "(a MAP term; widths " + ", ".join(sorted({f"{r['name']} {r['prior']['width']:g} "
+                                                     f"{r['unit']}" for r in rows}))
+           + ", one sd about the nominal)"
+           + (f"; held by the prior, not the data (posterior sd > 0.7 prior width): "
+              f"{', '.join(held)}" if held else "") + "."]
+    out += [f"{r['recording']}: the data pulled the camera's {r['name']} to {r['value']:.4g} "
+            f"{r['unit']}, {r['pull']:+.1f} prior widths from the nominal "
+            f"{r['prior']['nominal']:g} (posterior sd {r['posterior_over_prior']:.2f} of the "
+            "prior's): a calibrated camera is unlikely to be this far off; the camera "
+            "parameter may stand in for something the model lacks."
+            for r in rows if abs(r["pull"]) > 2.0]
+    return out
 
 
 # -- per recording ---------------------------------------------------------------------------
@@ -520,7 +562,8 @@ def _summary(*, recordings: list[tuple[str, list[Recording]]], results: list[Par
         "has_ball": any(pr.prep.has_ball for pr in results),
         "frame_held": any(pr.kind == "frame held" for pr in results),
         "verdict": _verdict(sel.chosen, suspects, significant_loc),
-        "notes": _notes(suspects, results, recordings, notes) + _bound_notes(sel),
+        "notes": _notes(suspects, results, recordings, notes) + _bound_notes(sel)
+                 + _prior_notes(sel, opts.camera_prior),
         "effects": [n for n in sel.chosen if n not in suspects],
         "effects_selected": sel.chosen,
         "suspects": suspects,
@@ -541,7 +584,8 @@ def _summary(*, recordings: list[tuple[str, list[Recording]]], results: list[Par
         "recordings": [pr.summary for pr in results],
         "null": null.to_json(),
         "options": {"prep": asdict(opts.prep), "residual": asdict(opts.residual),
-                    "latency0": opts.latency0, "max_effects": opts.max_effects},
+                    "latency0": opts.latency0, "max_effects": opts.max_effects,
+                    "camera_prior": opts.camera_prior},
         "recording": {**rec0.summary(), "recordings": len(recordings),
                       "runs_used": sum(len(r) for _, r in recordings),
                       "duration_used": float(sum(r.duration for _, rs in recordings

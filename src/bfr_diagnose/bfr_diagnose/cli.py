@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 import time
 import warnings
@@ -72,6 +73,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="lag of a logged velocity [s] (default: measured on every recording)")
     p.add_argument("--ball", choices=("auto", "yes", "no"), default="auto",
                    help="use the ball rows (auto: when the recording has ball fixes)")
+    p.add_argument("--camera-prior", type=float, default=1.0, metavar="F",
+                   help="the camera's calibration prior (offset 5 mm, rotation 0.05 rad, scale "
+                        "3 %%, one sd) with its widths times F; 0: no prior (1)")
     p.add_argument("--max-effects", type=int, default=6, help="most effects to add (6)")
     p.add_argument("--effects", help="comma-separated subset of the library to consider: "
                    + ", ".join(EFFECT_NAMES))
@@ -115,12 +119,15 @@ def _options(args: argparse.Namespace, first: Recording) -> DiagnoseOptions:
         if bad:
             raise DiagnoseError(f"--effects: unknown effect(s) {bad}; known: "
                                 f"{', '.join(EFFECT_NAMES)}")
+    if not (math.isfinite(args.camera_prior) and args.camera_prior >= 0.0):
+        raise DiagnoseError(f"--camera-prior {args.camera_prior!r}: expected a number >= 0")
     lat0 = args.camera_latency
     if lat0 is None:
         lat0 = float(first.meta.get("camera_latency_nominal", 0.0) or 0.0)
     return DiagnoseOptions(prep=PrepConfig(ball=args.ball, dtheta_delay=args.velocity_lag),
                            latency0=lat0, max_effects=args.max_effects, only=only,
-                           null_runs=args.null_runs, null=not args.no_null)
+                           null_runs=args.null_runs, null=not args.no_null,
+                           camera_prior=args.camera_prior)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -69,8 +69,8 @@ from bfr_model.params import RigParams
 
 from bfr_diagnose.preprocess import SensorCorrection
 
-__all__ = ["DESTINATION", "EFFECTS", "EFFECT_NAMES", "FRAME_ONLY_EFFECTS", "MIN_SIZE",
-           "SENSOR_PARAMS", "SHAPE_ORDERS", "Effect", "SensorParam", "apply_effects",
+__all__ = ["CAMERA_PRIOR", "DESTINATION", "EFFECTS", "EFFECT_NAMES", "FRAME_ONLY_EFFECTS",
+           "MIN_SIZE", "SENSOR_PARAMS", "SHAPE_ORDERS", "Effect", "SensorParam", "apply_effects",
            "display_values", "effect_size", "param_value", "plausibility", "sensor_correction",
            "sensor_names_for", "shape_truth"]
 
@@ -414,6 +414,10 @@ class SensorParam:
         ``"camera"`` (any ball: also a held frame), ``"torque"`` (a turning frame).
     description : str
         One line for the report.
+    prior : float or None
+        [unit] Width (one standard deviation) of the calibration prior about the nominal
+        value (:class:`~bfr_diagnose.preprocess.SensorCorrection`'s default), or None: no
+        prior (:data:`CAMERA_PRIOR`).
     """
 
     name: str
@@ -423,16 +427,41 @@ class SensorParam:
     upper: float
     needs: str
     description: str
+    prior: float | None = None
 
+    def __post_init__(self) -> None:
+        if self.prior is not None and not (math.isfinite(self.prior) and self.prior > 0.0):
+            raise ValueError(f"sensor parameter {self.name}: prior width must be a positive "
+                             f"number, got {self.prior!r}")
+
+
+#: The calibration prior of the camera's extrinsics and scale: one standard deviation about
+#: the nominal (no correction), in the parameter's unit. A camera that reports the ball in
+#: metres about the shaft has been calibrated by whoever built the rig (a checkerboard, or
+#: the frame's known size in the image): its scale is known to a few per cent, the shaft's
+#: image to a few millimetres, its rotation to a few degrees. Used as a MAP term (extra
+#: residual rows, :meth:`bfr_diagnose.identify.Problem.fit`) that holds these parameters
+#: where the data do not fix them: in closed-loop data the ball stays near the top of the
+#: frame and the camera's scale against the contour's mean radius is a nearly flat
+#: direction, which without a prior ran the scale to its 1.25 bound and the contour 14 mm
+#: small on the NTNU logs. Widths, not the bounds: data that fix a parameter move it
+#: freely (the report gives each value's pull against its prior and its posterior width
+#: over the prior's). ``bfr diagnose --camera-prior F`` multiplies every width (0: none).
+CAMERA_PRIOR: dict[str, float] = {"offset_x": 5e-3, "offset_y": 5e-3, "rotation": 0.05,
+                                  "scale": 0.03}
 
 #: The sensor model fitted on every recording (module docstring).
 SENSOR_PARAMS: tuple[SensorParam, ...] = (
     SensorParam("latency", "s", 5e-4, -0.05, 0.1, "ball",
                 "camera latency beyond the nominal: a fix shows the ball this much earlier"),
-    SensorParam("offset_x", "m", 2e-4, -0.03, 0.03, "camera", "camera origin offset, x"),
-    SensorParam("offset_y", "m", 2e-4, -0.03, 0.03, "camera", "camera origin offset, y"),
-    SensorParam("rotation", "rad", 2e-3, -0.3, 0.3, "camera", "camera rotation"),
-    SensorParam("scale", "-", 1e-3, 0.8, 1.25, "camera", "camera scale"),
+    SensorParam("offset_x", "m", 2e-4, -0.03, 0.03, "camera", "camera origin offset, x",
+                CAMERA_PRIOR["offset_x"]),
+    SensorParam("offset_y", "m", 2e-4, -0.03, 0.03, "camera", "camera origin offset, y",
+                CAMERA_PRIOR["offset_y"]),
+    SensorParam("rotation", "rad", 2e-3, -0.3, 0.3, "camera", "camera rotation",
+                CAMERA_PRIOR["rotation"]),
+    SensorParam("scale", "-", 1e-3, 0.8, 1.25, "camera", "camera scale",
+                CAMERA_PRIOR["scale"]),
     SensorParam("theta_zero", "rad", 2e-3, -0.4, 0.4, "camera",
                 "the encoder's zero against the frame's shape"),
     SensorParam("torque_delay", "s", 2e-4, -0.02, 0.02, "torque",

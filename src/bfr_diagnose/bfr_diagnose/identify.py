@@ -22,6 +22,25 @@ is significant when its held-out gain exceeds the null's largest gain for that e
 (x1.25 + 0.02), ``dBIC < -6``, its joint fit is not degenerate, and it is larger than its
 engineering resolution (:data:`~bfr_diagnose.effects.MIN_SIZE`).
 
+Group test (several recordings). The pooled gain is a share of every recording's cost, so
+an effect that only some recordings can see (the friction's direction in the runs that turn
+both ways) is diluted by the others. The same joint fit is therefore also scored per
+recording: ``g_i = 1 - C_test,i(fit) / C_test,i(current)`` against that recording's own
+null threshold ``t_i`` (the null's fits scored on the recording alone, x1.25 + 0.02,
+:func:`~bfr_diagnose.null.null_part_gains`). The effect is significant in a group when the
+recordings ``S = {i: g_i > t_i}`` are not empty, the group's held-out gain (its costs
+pooled) exceeds the largest ``t_i`` of the group, the other recordings it enters are not
+made worse beyond the pooled threshold (their pooled gain ``> -t``) and all of them together
+not at all (the pooled gain ``> 0``: an effect that only stands in for another one in a few
+recordings, a torque offset for the dry friction in runs that turn one way, is not taken),
+the BIC on the group's
+training cost falls (``dBIC_S = N_eff,S ln(C_train,S(fit) / C_train,S(current)) +
+k ln N_eff,S < -6``, with ``N_eff,S`` the group's share of the effective samples), and the
+fit is neither degenerate nor below its resolution. Each recording's test has the
+false-positive level of the pooled one (the same margin over its own null), and the BIC on
+the group guards against many small chance excesses. Candidates are fitted fully for it
+when one recording's linearised gain reaches half its threshold (:func:`_screen_parts`).
+
 Selection, greedy forward. Stage 0 fits the sensor model alone. At each stage every
 candidate gets one Gauss-Newton step on top of the chosen effects with the sensor model
 refitted with it (the linearised screening: the least-squares fit of the candidate's and
@@ -37,6 +56,15 @@ identifiable from these recordings: never added, reported. Confounded pairs: a r
 that explains nearly as much as the winner and correlates beyond 0.9 with it (or adds
 nothing), and any physics parameter correlating beyond 0.9 with a sensor parameter (e.g.
 the contour's radius with the camera's scale), are reported instead of guessed.
+
+Calibration prior. The camera's offset, rotation and scale carry a Gaussian prior about
+the nominal (widths ``sigma_j``, :data:`~bfr_diagnose.effects.CAMERA_PRIOR`, times
+``prior_scale``): a MAP estimate, one extra residual row per parameter and part,
+``r_j = sqrt(tau) (x_j - x_j0) / sigma_j``, appended to the training rows the optimiser sees
+(never to the held-out cost). The data rows are weighted to unit variance and correlated over
+``tau`` samples (:func:`effective_samples`), so they carry ``sum w^2 / tau`` of
+log-likelihood; the ``sqrt(tau)`` puts the prior on the same footing, and a parameter the
+data do not fix gets back its prior width in the intervals below.
 
 Intervals. ``cov = s^2 (J^T J)^-1 tau`` at the optimum, 95 % intervals ``+- 1.96 sqrt(diag)``.
 With several recordings, :func:`between_recordings` fits every selected effect on each
@@ -70,7 +98,7 @@ from bfr_diagnose.preprocess import SensorCorrection
 from bfr_diagnose.residual import ResidualEvaluator
 
 __all__ = ["Fit", "LinearScreen", "Part", "Problem", "Selection", "autocorr_time",
-           "between_recordings", "linear_gain", "select_effects"]
+           "between_recordings", "effective_samples", "linear_gain", "select_effects"]
 
 FloatArray = NDArray[np.float64]
 Chosen = list[tuple[Effect, FloatArray]]
@@ -188,6 +216,8 @@ class Fit:
         Effect parameters fitted (without the sensors).
     ok : bool
         The fit evaluated everywhere.
+    part_costs : list of (float, float) or None
+        Each part's (training, held-out) cost (a fit on all parts).
     """
 
     effects: list[str]
@@ -198,6 +228,7 @@ class Fit:
     cov: FloatArray | None = None
     n_params: int = 0
     ok: bool = True
+    part_costs: list[tuple[float, float]] | None = None
 
     def chosen(self) -> Chosen:
         """``(Effect, values)`` pairs."""
@@ -234,11 +265,18 @@ class Problem:
         The recordings.
     base : RigParams
         Nominal parameters.
+    prior_scale : float
+        Every calibration prior's width times this (0: no prior; module docstring).
     """
 
-    def __init__(self, parts: list[Part], base: RigParams) -> None:
+    def __init__(self, parts: list[Part], base: RigParams, prior_scale: float = 1.0
+                 ) -> None:
+        if not (math.isfinite(prior_scale) and prior_scale >= 0.0):
+            raise ValueError(f"prior_scale must be a number >= 0, got {prior_scale!r}")
         self.parts = parts
         self.base = base
+        self.prior_scale = prior_scale
+        self.prior_tau = 1.0     # [samples] the residual's correlation (module docstring)
         self.m_ref = base.ball.mass
         self.n_eval = 0
         self._jac_cache: dict[tuple, Any] = {}
@@ -302,6 +340,11 @@ class Problem:
                 p.sigma[r - 1] = max(float(p.sigma_null[r - 1]), level)
         self._jac_cache.clear()
 
+    def prior_width(self, name: str) -> float | None:
+        """The calibration prior's width of a sensor parameter (None: no prior)."""
+        w = sensor_param(name).prior
+        return None if w is None or self.prior_scale == 0.0 else w * self.prior_scale
+
     # -- evaluation ----------------------------------------------------------------------
     def part_weighted(self, i: int, chosen: Chosen, sensor: FloatArray) -> FloatArray:
         """Part ``i``'s weighted rows, raveled."""
@@ -320,6 +363,16 @@ class Problem:
         """(train cost, test cost, weighted residual vector)."""
         w = self.weighted(chosen, sensors)
         return (float(np.nansum(w[self.train] ** 2)), float(np.nansum(w[self.test] ** 2)), w)
+
+    def part_costs(self, w: FloatArray) -> list[tuple[float, float]]:
+        """Each part's (training, held-out) cost of a residual vector."""
+        out = []
+        for i in range(len(self.parts)):
+            sl = self.part_slice(i)
+            x = w[sl]
+            out.append((float(np.nansum(x[self.train[sl]] ** 2)),
+                        float(np.nansum(x[self.test[sl]] ** 2))))
+        return out
 
     def part_slice(self, i: int) -> slice:
         """Where part ``i`` sits in the residual vector."""
@@ -460,7 +513,9 @@ class Problem:
         ke = x0e.size
         cuts = np.cumsum([e.k for e in effs])[:-1] if effs else []
         ub = (hi - x0) / scales
-        fitter = _Fitter(self, effs, cuts, snames, sensors0, parts, x0, scales, ke, ub)
+        prior = _prior_rows([self.prior_width(n) for _, n in snames], [n for _, n in snames],
+                            self.prior_tau, x0, scales, ke)
+        fitter = _Fitter(self, effs, cuts, snames, sensors0, parts, x0, scales, ke, ub, prior)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", OptimizeWarning)
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -468,24 +523,27 @@ class Problem:
                                 bounds=((lo - x0) / scales, ub), method="trf",
                                 max_nfev=max_nfev, x_scale=1.0, ftol=1e-7, xtol=1e-7)
         chosen, sensors = fitter.unpack(sol.x)
+        part_costs = None
         try:
-            c_tr, c_te, _ = self.cost(chosen, sensors) if only_part is None else \
+            c_tr, c_te, w = self.cost(chosen, sensors) if only_part is None else \
                 self._part_cost(only_part, chosen, sensors)
             ok = math.isfinite(c_tr) and math.isfinite(c_te)
+            if only_part is None:
+                part_costs = self.part_costs(w)
         except _BAD:
             c_tr = c_te = math.inf
             ok = False
         cov = None
         jac = sol.jac
         n = jac.shape[0]
-        s2 = 2.0 * sol.cost / max(n - x0.size, 1)
+        s2 = float(np.sum(sol.fun[:fitter.size] ** 2)) / max(n - prior.cols.size - x0.size, 1)
         try:
             cov = _covariance(jac, s2, scales)
         except (np.linalg.LinAlgError, ValueError):
             cov = None
         return Fit(effects=[e.name for e, _ in chosen], values=[v for _, v in chosen],
                    sensors=sensors, cost_train=c_tr, cost_test=c_te, cov=cov, n_params=ke,
-                   ok=ok)
+                   ok=ok, part_costs=part_costs)
 
     def _part_cost(self, i: int, chosen: Chosen, sensors: list[FloatArray]
                    ) -> tuple[float, float, FloatArray]:
@@ -515,16 +573,59 @@ def _covariance(jac: FloatArray, s2: float, scales: FloatArray) -> FloatArray:
     return cov
 
 
+@dataclass(frozen=True, kw_only=True)
+class _Prior:
+    """The calibration prior's rows of one fit: ``r = a + B xn`` (module docstring).
+
+    ``cols`` are the columns of the fit's normalised vector ``xn`` that carry a prior,
+    ``a`` the rows at ``xn = 0`` and ``b`` each row's slope (``sqrt(tau) scale / sigma``).
+    """
+
+    cols: NDArray[np.int_]
+    a: FloatArray
+    b: FloatArray
+
+    def rows(self, xn: FloatArray) -> FloatArray:
+        """The prior's residual rows at ``xn``."""
+        return self.a + self.b * xn[self.cols]
+
+
+def _prior_rows(widths: list[float | None], names: list[str], tau: float, x0: FloatArray,
+                scales: FloatArray, ke: int) -> _Prior:
+    """The prior rows of a fit's sensor parameters ``names`` (columns ``ke`` on).
+
+    Row ``r_j = sqrt(tau) (x_j - x_j0) / sigma_j`` with ``x_j = x0_j + xn_j scale_j``,
+    ``x_j0`` the parameter's nominal (no correction, :class:`SensorCorrection`'s default)
+    and ``sigma_j`` its width (``widths``; None: no prior row).
+    """
+    default = SensorCorrection()
+    cols, a, b = [], [], []
+    root = math.sqrt(max(tau, 1.0))
+    for k, (name, width) in enumerate(zip(names, widths, strict=True)):
+        if width is None:
+            continue
+        c = ke + k
+        cols.append(c)
+        a.append(root * (x0[c] - float(getattr(default, name))) / width)
+        b.append(root * scales[c] / width)
+    return _Prior(cols=np.array(cols, int), a=np.array(a, float), b=np.array(b, float))
+
+
 class _Fitter:
-    """The residual and its part-wise Jacobian of one joint fit (:meth:`Problem.fit`)."""
+    """The residual and its part-wise Jacobian of one joint fit (:meth:`Problem.fit`).
+
+    The residual is the parts' training rows followed by the calibration prior's rows.
+    """
 
     def __init__(self, prob: Problem, effs: list[Effect], cuts: Any,
                  snames: list[tuple[int, str]], sensors0: list[FloatArray], parts: list[int],
-                 x0: FloatArray, scales: FloatArray, ke: int, ub: FloatArray) -> None:
+                 x0: FloatArray, scales: FloatArray, ke: int, ub: FloatArray,
+                 prior: _Prior) -> None:
         self.prob, self.effs, self.cuts, self.snames = prob, effs, cuts, snames
         self.sensors0, self.parts, self.x0, self.scales, self.ke = (sensors0, parts, x0,
                                                                     scales, ke)
         self.ub = ub
+        self.prior = prior
         self.mask = np.concatenate([prob.train[prob.part_slice(i)] for i in parts])
         self.size = int(self.mask.sum())
         self._last: tuple[FloatArray, list[FloatArray]] | None = None
@@ -547,18 +648,21 @@ class _Fitter:
             ws = self._parts(chosen, sensors, self.parts)
         except _BAD:
             self._last = None
-            return np.full(self.size, 1e3)
+            return np.concatenate([np.full(self.size, 1e3), self.prior.rows(xn)])
         w = np.concatenate(ws)[self.mask]
         if not np.all(np.isfinite(w)):
             w = np.where(np.isfinite(w), w, 0.0)
         self._last = (np.array(xn), ws)
-        return w
+        return np.concatenate([w, self.prior.rows(xn)])
 
     def jac(self, xn: FloatArray) -> FloatArray:
         if self._last is None or not np.array_equal(self._last[0], xn):
             self.fun(xn)
+        n_prior = self.prior.cols.size
+        jp = np.zeros((n_prior, xn.size))
+        jp[np.arange(n_prior), self.prior.cols] = self.prior.b
         if self._last is None:
-            return np.zeros((self.size, xn.size))
+            return np.vstack([np.zeros((self.size, xn.size)), jp])
         base = self._last[1]
         lens = [b.size for b in base]
         offs = np.concatenate([[0], np.cumsum(lens)]).astype(int)
@@ -582,7 +686,7 @@ class _Fitter:
                     continue
                 J[offs[k]:offs[k + 1], col] = (w - base[k]) / step
         J[~np.isfinite(J)] = 0.0
-        return J[self.mask]
+        return np.vstack([J[self.mask], jp])
 
     def _effect_of(self, col: int) -> Effect:
         edges = np.concatenate([[0], np.cumsum([e.k for e in self.effs])])
@@ -611,6 +715,7 @@ class _Criteria:
     screen_top: int
     screen_frac: float
     degenerate_corr: float
+    part_thresholds: dict[str, list[float | None]] = field(default_factory=dict)
 
     def threshold(self, name: str) -> float:
         """Held-out gain the effect ``name`` must exceed (0 when the null has none)."""
@@ -714,6 +819,24 @@ class LinearScreen:
         c_tr = float(np.sum((wt + self.D_s[tr] @ b_s + D_e[tr] @ b_e) ** 2))
         return (1.0 - c1 / c0 if c0 > 0 else 0.0), b_e, c_tr
 
+    def step(self, w: FloatArray, D_e: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """The effect's step and the residual after it with the sensors refitted, everywhere.
+
+        Returns
+        -------
+        b_e : ndarray
+            The effect's step (unclipped).
+        r : ndarray
+            ``w + D_s b_s + D_e b_e`` on all rows (training and held-out).
+        """
+        w = np.where(np.isfinite(w), w, 0.0)
+        tr = self.train
+        E = self._perp(D_e[tr])
+        b_e = (np.linalg.lstsq(E, -self._perp(w[tr]), rcond=None)[0] if np.any(E)
+               else np.zeros(D_e.shape[1]))
+        b_s = self._sensor_step(-w[tr] - D_e[tr] @ b_e)
+        return b_e, w + self.D_s @ b_s + D_e @ b_e
+
     def best_column(self, w: FloatArray, cols: list[FloatArray]) -> int:
         """Index of the single column that lowers the training cost most.
 
@@ -742,7 +865,9 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
                    tau_noise: float, max_effects: int = 3, dbic_min: float = -6.0,
                    confound_corr: float = 0.9,
                    only: list[str] | None = None, progress: Any = None, screen_top: int = 2,
-                   screen_frac: float = 0.5, degenerate_corr: float = 0.995) -> Selection:
+                   screen_frac: float = 0.5, degenerate_corr: float = 0.995,
+                   part_thresholds: dict[str, list[float | None]] | None = None
+                   ) -> Selection:
     """Greedy forward selection of effects (module docstring).
 
     Parameters
@@ -774,15 +899,19 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
     degenerate_corr : float
         A joint fit is degenerate when a parameter ends at a bound its nominal value is not
         at, or two parameters of different effects correlate beyond this.
+    part_thresholds : dict, optional
+        Per effect, each recording's own null threshold (None where the effect does not
+        enter): the group test (module docstring). None or empty: no group test.
     """
     crit = _Criteria(thresholds=thresholds, dbic_min=dbic_min, confound_corr=confound_corr,
                      screen_top=screen_top, screen_frac=screen_frac,
-                     degenerate_corr=degenerate_corr)
+                     degenerate_corr=degenerate_corr, part_thresholds=part_thresholds or {})
     cands = [c for c in prob.candidates if only is None or c in only]
     chosen: Chosen = []
     sensors = [np.array(s, float) for s in sensors0]
     c_tr, c_te, w = prob.cost(chosen, sensors)
     tau, n_eff = effective_samples(prob, w, tau_noise)
+    prob.prior_tau = tau
     stages: list[dict[str, Any]] = []
     confounded: list[dict[str, Any]] = []
     final = Fit(effects=[], values=[], sensors=sensors, cost_train=c_tr, cost_test=c_te)
@@ -792,6 +921,7 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
             chosen, sensors = _refit(prob, chosen, sensors)
             c_tr, c_te, w = prob.cost(chosen, sensors)
             tau, n_eff = effective_samples(prob, w, tau_noise)
+            prob.prior_tau = tau
         st = _Stage(index=index, chosen=chosen, sensors=sensors, cost_train=c_tr,
                     cost_test=c_te, w=w, n_eff=n_eff)
         rows, fits = _assess_candidates(prob, st, cands, crit, progress)
@@ -890,6 +1020,53 @@ def _screen(prob: Problem, st: _Stage, names: list[str]) -> dict[str, tuple]:
     return out
 
 
+def _screen_parts(prob: Problem, st: _Stage, names: list[str], crit: _Criteria
+                  ) -> dict[str, list[float]]:
+    """Each recording's linearised held-out gain of each candidate (the group test's screen).
+
+    The pooled screen refits only the sensors, so an effect that shows in some recordings
+    only, against an effect already chosen (a torque offset beside the Coulomb friction the
+    one-way runs fitted), is screened at a gain near zero: its step is held back by the
+    recordings where it only competes with the chosen effect. Here the chosen effects'
+    columns are refitted with the sensors (a Gauss-Newton step of the joint fit) and the
+    held-out cost of that one step is scored per recording.
+    """
+    key = ("stage", st.index) if st.index else ("nominal",)
+    D_s = prob.sensor_jacobian(st.chosen, st.sensors, st.w, key=key)
+    cols = [D_s]
+    for k, (eff, v) in enumerate(st.chosen):
+        for j in range(eff.k):
+            h = float(eff.scales[j]) * (1.0 if v[j] + eff.scales[j] <= eff.upper[j] else -1.0)
+            x = np.array(v, float)
+            x[j] += h
+            moved = [*st.chosen[:k], (eff, x), *st.chosen[k + 1:]]
+            try:
+                col = (prob.weighted(moved, st.sensors) - st.w) / h
+            except _BAD:
+                col = np.zeros_like(st.w)
+            cols.append(np.where(np.isfinite(col), col, 0.0)[:, None])
+    D_a = np.hstack(cols)
+    cur = np.where(np.isfinite(st.w), st.w, 0.0)
+    screen = LinearScreen(D_a, prob.train, prob.test)
+    out = {}
+    for name in names:
+        eff = EFFECTS[name]
+        if name == "track_bumps" or name in st.chosen_names or not crit.part_thresholds.get(name):
+            continue
+        x0 = np.asarray(eff.start(prob.base), float)
+        D = prob.effect_jacobian(st.chosen, st.sensors, eff, x0, st.w, key=key)
+        _, step = screen.step(cur, D)
+        gains = []
+        for i in range(len(prob.parts)):
+            sl = prob.part_slice(i)
+            te = prob.test[sl]
+            c0 = float(np.sum(cur[sl][te] ** 2))
+            c1 = float(np.sum(step[sl][te] ** 2))
+            gains.append(1.0 - c1 / c0 if c0 > 0 else 0.0)
+        out[name] = gains
+    return out
+
+
 def _screen_bump(prob: Problem, st: _Stage, screen: LinearScreen, key: Any) -> tuple:
     """The best single bump on a grid of positions (linear in its height), by training cost."""
     cols = prob.bump_columns(st.chosen, st.sensors, st.w, key=key)
@@ -908,10 +1085,14 @@ def _assess_candidates(prob: Problem, st: _Stage, cands: list[str], crit: _Crite
     screened = _screen(prob, st, names)
     names = [n for n in names if n in screened]
     top = sorted(names, key=lambda n: -screened[n][1])[:crit.screen_top]
+    by_part = _screen_parts(prob, st, names, crit) if crit.part_thresholds else {}
     rows = []
     fits: dict[str, Fit] = {}
     for name in names:
-        full = name in top or screened[name][1] >= crit.screen_frac * crit.threshold(name)
+        full = (name in top or screened[name][1] >= crit.screen_frac * crit.threshold(name)
+                or any(t is not None and g >= crit.screen_frac * t for g, t in
+                       zip(by_part.get(name, []), crit.part_thresholds.get(name, []),
+                           strict=False)))
         row, fit = _assess(prob, st, name, screened[name], full, crit)
         if fit is not None:
             fits[name] = fit
@@ -946,17 +1127,66 @@ def _assess(prob: Problem, st: _Stage, name: str, screened: tuple, full: bool,
         size = effect_size(name, vals0, prob.base)
     big = size >= MIN_SIZE.get(name, 0.0)
     why = plausibility(name, vals, prob.base)
+    pooled = bool(full and gain > thr and dbic < crit.dbic_min and degenerate is None and big)
+    group = (_group_test(prob, st, eff, fit, crit) if fit is not None and
+             crit.part_thresholds.get(name) else None)
+    by_group = bool(not pooled and group is not None and group["significant"]
+                    and gain > 0.0 and degenerate is None and big)
     row = {"effect": name, "stage": st.index + 1, "heldout_gain": gain, "dbic": dbic,
            "plausible": why is None, "implausible_because": why,
            "threshold": thr,
-           "significant": bool(full and gain > thr and dbic < crit.dbic_min
-                               and degenerate is None and big),
+           "significant": pooled or by_group,
+           "significant_by": "all recordings" if pooled else "group" if by_group else None,
+           "group": group,
            "selected": False, "degenerate": degenerate,
            "size": size, "below_min_size": not big,
            "fit": "full" if full else "linearised (screened out)",
            "values": dict(zip(eff.names, map(float, vals), strict=True)),
            "units": dict(zip(eff.names, eff.units, strict=True))}
     return row, fit
+
+
+def _group_test(prob: Problem, st: _Stage, eff: Effect, fit: Fit, crit: _Criteria
+                ) -> dict[str, Any] | None:
+    """The group test of a full joint fit: per-recording gains and the group's BIC.
+
+    Module docstring (group test). None when the fit has no per-part costs.
+    """
+    if fit.part_costs is None or not fit.ok:
+        return None
+    thr = crit.part_thresholds[eff.name]
+    cur = prob.part_costs(st.w)
+    rows, group, rest = [], [], []
+    for i, (p, t) in enumerate(zip(prob.parts, thr, strict=True)):
+        if t is None or not p.affected_by(eff):
+            continue
+        g = 1.0 - fit.part_costs[i][1] / cur[i][1] if cur[i][1] > 0 else 0.0
+        rows.append({"recording": p.name, "gain": float(g), "threshold": float(t)})
+        (group if g > t else rest).append(i)
+    out: dict[str, Any] = {"recordings": [prob.parts[i].name for i in group],
+                           "per_recording": rows, "gain": None, "threshold": None,
+                           "gain_rest": None, "dbic": None, "significant": False}
+    if not group:
+        return out
+
+    def pooled_gain(idx: list[int]) -> float:
+        c0 = sum(cur[i][1] for i in idx)
+        return 1.0 - sum(fit.part_costs[i][1] for i in idx) / c0 if c0 > 0 else 0.0
+
+    g_grp = pooled_gain(group)
+    t_grp = max(float(thr[i]) for i in group)
+    g_rest = pooled_gain(rest) if rest else 0.0
+    n_all = int(np.sum(prob.train))
+    n_grp = sum(int(np.sum(prob.train[prob.part_slice(i)])) for i in group)
+    n_eff = st.n_eff * n_grp / max(n_all, 1)
+    c0 = sum(cur[i][0] for i in group)
+    c1 = sum(fit.part_costs[i][0] for i in group)
+    dbic = (n_eff * math.log(max(c1, 1e-300) / c0) + eff.k * math.log(max(n_eff, 2.0))
+            if c0 > 0 else math.inf)
+    out.update(gain=float(g_grp), threshold=t_grp, gain_rest=float(g_rest), dbic=float(dbic),
+               significant=bool(g_grp > t_grp and g_rest > -crit.threshold(eff.name)
+                                and dbic < crit.dbic_min))
+    return out
 
 
 def _describe(index: int, row: dict[str, Any]) -> str:
@@ -966,6 +1196,9 @@ def _describe(index: int, row: dict[str, Any]) -> str:
             f"(null {row['threshold']:.4f}) dBIC {row['dbic']:+.1f}"
             + ("" if row["fit"] == "full" else " [linearised]")
             + (f" [degenerate: {row['degenerate']}]" if row["degenerate"] else "")
+            + (f" [significant in a group: {', '.join(row['group']['recordings'])}, dBIC "
+               f"{row['group']['dbic']:+.1f}]" if row.get("significant_by") == "group"
+               else "")
             + ("" if not row["below_min_size"]
                else f" [size {row['size']:.2g} below {MIN_SIZE[name]:g}]"))
 
@@ -991,6 +1224,8 @@ def _ranking(stages: list[dict[str, Any]], cands: list[str]) -> list[dict[str, A
             "gain_at_selection": sel["heldout_gain"] if sel else None,
             "threshold_at_selection": sel["threshold"] if sel else None,
             "dbic_at_selection": sel["dbic"] if sel else None,
+            "significant_by": sel.get("significant_by") if sel else None,
+            "group_at_selection": sel.get("group") if sel else None,
             "values_at_selection": sel["values"] if sel else None})
     out.sort(key=lambda r: (not r["selected"], r["stage_selected"] or 0, -r["heldout_gain"]))
     return out
@@ -1182,9 +1417,14 @@ def sensor_table(prob: Problem, fit: Fit, tau: float) -> list[dict[str, Any]]:
     """Each part's fitted sensor model with 95 % intervals.
 
     ``at_bound`` is the bound a value ran to (within 0.1 % of its range), else None: such a
-    value is not identified by the recording (:func:`bfr_diagnose.api` notes it).
+    value is not identified by the recording (:func:`bfr_diagnose.api` notes it). A
+    parameter with a calibration prior has ``prior`` (its nominal and width), ``pull``
+    (``(value - nominal) / width``: beyond 2 the data moved it against the prior) and
+    ``posterior_over_prior`` (its posterior sd over the prior's width: near 1 the data say
+    nothing about it, the prior holds it; well under 1 the data fix it).
     """
     out = []
+    default = SensorCorrection()
     j = fit.n_params
     for p, vals in zip(prob.parts, fit.sensors, strict=True):
         for name, v in zip(p.sensor_names, vals, strict=True):
@@ -1195,9 +1435,16 @@ def sensor_table(prob: Problem, fit: Fit, tau: float) -> list[dict[str, Any]]:
             margin = 1e-3 * (sp.upper - sp.lower)
             bound = (sp.lower if v - sp.lower <= margin else
                      sp.upper if sp.upper - v <= margin else None)
-            out.append({"recording": p.name, "name": name, "unit": sp.unit, "value": float(v),
-                        "ci95": [float(v - 1.96 * sd), float(v + 1.96 * sd)], "std": sd,
-                        "description": sp.description, "at_bound": bound})
+            row = {"recording": p.name, "name": name, "unit": sp.unit, "value": float(v),
+                   "ci95": [float(v - 1.96 * sd), float(v + 1.96 * sd)], "std": sd,
+                   "description": sp.description, "at_bound": bound, "prior": None}
+            width = prob.prior_width(name)
+            if width is not None:
+                nominal = float(getattr(default, name))
+                row.update(prior={"nominal": nominal, "width": width},
+                           pull=float((v - nominal) / width),
+                           posterior_over_prior=float(sd / width))
+            out.append(row)
             j += 1
     return out
 

@@ -42,6 +42,10 @@ nominal residual, ``2 (r(longer filters) - r(data))``, is added to every noise d
 null is then "noise plus what our own processing does", and nothing below the processing's
 resolution counts as a mismatch. On real or noisy data this term is far below the noise.
 
+Per recording (:func:`null_part_gains`, with several recordings): the same fits, each scored
+on one recording's blocks alone, give each recording's own null gains, the noise level of
+the selection's group test (an effect that shows in some of the recordings only).
+
 The threshold of an effect is ``margin * max(null gains) + floor``. Gains are cost ratios,
 so they do not depend on the noise level itself, only on the number of effectively
 independent samples and on how many directions an effect can fit.
@@ -64,8 +68,8 @@ from bfr_diagnose.identify import LinearScreen, Part, Problem, autocorr_time
 from bfr_diagnose.preprocess import Piece, PrepConfig, prepare_pieces
 from bfr_diagnose.residual import Residual, ResidualConfig, ResidualEvaluator
 
-__all__ = ["NullCalibration", "PartNoise", "noisy_copy", "null_gains", "part_noise",
-           "thresholds_of"]
+__all__ = ["NullCalibration", "PartNoise", "noisy_copy", "null_gains", "null_part_gains",
+           "part_noise", "part_thresholds_of", "thresholds_of"]
 
 
 FloatArray = NDArray[np.float64]
@@ -111,6 +115,9 @@ class NullCalibration:
         Held-out gain of each effect in each null draw.
     thresholds : dict
         Largest null gain times ``margin`` plus ``floor``, per effect.
+    part_thresholds : dict
+        The same of each recording alone (the group test's), per effect a list over the
+        recordings (None where the effect does not enter); empty with one recording.
     tau : float
         Autocorrelation time of the noise residual [samples] (the largest recording's).
     runs : int
@@ -134,6 +141,7 @@ class NullCalibration:
     noise: list[dict[str, float]]
     source: str
     rms_null: list[list[float]] = field(default_factory=list)
+    part_thresholds: dict[str, list[float | None]] = field(default_factory=dict)
     msq: list[FloatArray] | None = field(default=None, repr=False)
 
     def to_json(self) -> dict[str, Any]:
@@ -270,10 +278,43 @@ def null_gains(prob: Problem, noises: list[PartNoise], sensors0: list[FloatArray
     The Jacobians at the nominal physics with the stage-0 sensors are cached in ``prob``
     under the key the selection's first stage uses.
     """
+    screen = LinearScreen(_null_sensor_columns(prob, sensors0), prob.train, prob.test)
+    return {name: per[0] for name, per in
+            _null_screen_gains(prob, noises, sensors0, [screen]).items()}
+
+
+def null_part_gains(prob: Problem, noises: list[PartNoise], sensors0: list[FloatArray]
+                    ) -> dict[str, list[list[float]]]:
+    """Each recording's own null gains, per effect: ``gains[name][i]`` over the draws.
+
+    The same linearised fits as :func:`null_gains`, each scored on one recording alone
+    (its training and held-out blocks, its own sensor model): the noise level of the
+    per-recording held-out gains that the group test of the selection compares with
+    (:func:`~bfr_diagnose.identify.select_effects`). A recording the effect does not enter
+    has no draws (an empty list).
+    """
+    D_s = _null_sensor_columns(prob, sensors0)
+    screens = []
+    for i in range(len(prob.parts)):
+        mine = np.zeros(prob.train.size, bool)
+        mine[prob.part_slice(i)] = True
+        screens.append(LinearScreen(D_s, prob.train & mine, prob.test & mine))
+    out = _null_screen_gains(prob, noises, sensors0, screens)
+    return {name: [g if prob.parts[i].affected_by(EFFECTS[name]) else []
+                   for i, g in enumerate(per)] for name, per in out.items()}
+
+
+def _null_sensor_columns(prob: Problem, sensors0: list[FloatArray]) -> FloatArray:
+    """The sensor columns at the nominal physics and the stage-0 sensors (cached)."""
+    w0 = prob.weighted([], sensors0)
+    return prob.sensor_jacobian([], sensors0, w0, key=("nominal",))
+
+
+def _null_screen_gains(prob: Problem, noises: list[PartNoise], sensors0: list[FloatArray],
+                       screens: list[LinearScreen]) -> dict[str, list[list[float]]]:
+    """Every candidate's null gains under each screen: ``gains[name][screen][draw]``."""
     w0 = prob.weighted([], sensors0)
     key = ("nominal",)
-    D_s = prob.sensor_jacobian([], sensors0, w0, key=key)
-    screen = LinearScreen(D_s, prob.train, prob.test)
     runs = min(len(n.draws) for n in noises)
     es = []
     for k in range(runs):
@@ -282,19 +323,26 @@ def null_gains(prob: Problem, noises: list[PartNoise], sensors0: list[FloatArray
             d = noise.draws[k]
             parts.append(np.concatenate([d[r - 1] / p.sigma[r - 1] for r in p.rows]))
         es.append(np.concatenate(parts))
-    gains: dict[str, list[float]] = {}
+    gains: dict[str, list[list[float]]] = {}
     for name in prob.candidates:
         eff = EFFECTS[name]
         if name == "track_bumps":
             cols = [c for _, c in prob.bump_columns([], sensors0, w0, key=key)]
-            gains[name] = ([screen.gain(e, cols[screen.best_column(e, cols)][:, None])[0]
-                            for e in es] if cols else [0.0 for _ in es])
+            gains[name] = [[sc.gain(e, cols[sc.best_column(e, cols)][:, None])[0]
+                            for e in es] if cols else [0.0 for _ in es] for sc in screens]
             continue
         x0 = np.asarray(eff.start(prob.base), float)
         D = prob.effect_jacobian([], sensors0, eff, x0, w0, key=key)
         clip0 = np.isclose(x0, np.asarray(eff.lower, float))
-        gains[name] = [screen.gain(e, D, clip0)[0] for e in es]
+        gains[name] = [[sc.gain(e, D, clip0)[0] for e in es] for sc in screens]
     return gains
+
+
+def part_thresholds_of(gains: dict[str, list[list[float]]], margin: float = 1.25,
+                       floor: float = 0.02) -> dict[str, list[float | None]]:
+    """Per effect and recording, ``margin * max(null gains) + floor`` (None: not entered)."""
+    return {n: [float(margin * max(*g, 0.0) + floor) if g else None for g in per]
+            for n, per in gains.items()}
 
 
 def thresholds_of(gains: dict[str, list[float]], margin: float = 1.25,

@@ -211,14 +211,22 @@ def _md_sensors(d: Diagnosis) -> list[str]:
     s = d.summary
     lat0 = s["options"]["latency0"]
     L = ["## Sensor timing and camera, measured on each recording (not physics)", "",
-         "| recording | quantity | value | 95 % CI | unit |", "|---|---|---|---|---|"]
+         "Prior: the camera's calibration prior (nominal +- one sd), the value's pull in prior "
+         "widths and its posterior sd over the prior's (near 1: the prior, not the data, "
+         "holds it).", "",
+         "| recording | quantity | value | 95 % CI | unit | prior | pull | post./prior |",
+         "|---|---|---|---|---|---|---|---|"]
     for r in s["sensor_timing"]:
         add = lat0 if r["name"] == "latency" else 0.0
         name = "camera latency (total)" if r["name"] == "latency" else r["description"]
         if r.get("at_bound") is not None:
             name += " (**at its bound: not identified**)"
+        pr = r.get("prior")
+        prior = (f"{pr['nominal']:g} +- {pr['width']:g} | {r['pull']:+.2f} | "
+                 f"{r['posterior_over_prior']:.2f}" if pr else " | | ")
         L.append(f"| {Path(r['recording']).name} | {name} | {r['value'] + add:.4g} | "
-                 f"{_num(r['ci95'][0] + add)} .. {_num(r['ci95'][1] + add)} | {r['unit']} |")
+                 f"{_num(r['ci95'][0] + add)} .. {_num(r['ci95'][1] + add)} | {r['unit']} | "
+                 f"{prior} |")
     for pr in d.parts:
         lag = pr.prep.info.get("velocity_lag")
         if lag is not None:
