@@ -34,19 +34,28 @@ def explained(e: np.ndarray, angles: list[np.ndarray]) -> float:
     return float(1.0 - np.var(e - a @ coef) / np.var(e))
 
 
+def distances(name: str, curve: OffsetCurve) -> tuple[np.ndarray, ...]:
+    """``(rho, beta, psi, e)`` of a log's new camera fixes (the longest run).
+
+    ``rho`` the fix's distance from the shaft [m], ``beta`` its world angle (clockwise from
+    +y), ``psi = theta + beta`` its angle in the frame, ``e = rho - |p(phi(psi))|`` [m].
+    """
+    run = max(read_runs(f"../shared/data/ntnu-rig/{name}.txt"), key=lambda r: r.n)
+    ok = run.ball_valid.astype(bool) & np.asarray(run.new_fix_mask(), bool)
+    x, y, theta = run.ball_x[ok], run.ball_y[ok], run.theta[ok]
+    rho = np.hypot(x, y)
+    beta = np.arctan2(x, y)
+    psi = theta + beta
+    e = rho - np.linalg.norm(curve.point(curve.phi_from_ball_angle(psi)), axis=-1)
+    return rho, beta, psi, e
+
+
 def main() -> None:
     """Print one line per log."""
     curve = OffsetCurve.from_params(load_params())
     for name in LOGS:
-        run = max(read_runs(f"../shared/data/ntnu-rig/{name}.txt"), key=lambda r: r.n)
-        ok = run.ball_valid.astype(bool) & np.asarray(run.new_fix_mask(), bool)
-        x, y, theta = run.ball_x[ok], run.ball_y[ok], run.theta[ok]
-        rho = np.hypot(x, y)
-        beta = np.arctan2(x, y)          # world angle, clockwise from +y
-        psi = theta + beta               # the ball's angle in the frame
-        phi = curve.phi_from_ball_angle(psi)
-        e = rho - np.linalg.norm(curve.point(phi), axis=-1)
-        print(f"{name:16s} n={ok.sum():5d} mean(rho-model)={e.mean() * 1e3:+.2f} mm "
+        _, beta, psi, e = distances(name, curve)
+        print(f"{name:16s} n={e.size:5d} mean(rho-model)={e.mean() * 1e3:+.2f} mm "
               f"rms={e.std() * 1e3:.2f} mm | var explained: frame-fixed(psi) "
               f"{explained(e, [psi]):.2f}, world-fixed(beta) {explained(e, [beta]):.2f}, "
               f"both {explained(e, [psi, beta]):.2f}; beta range "

@@ -1,4 +1,4 @@
-"""Which camera-fixed term do the ball's distances support, beyond the frame-fixed contour?
+"""Which camera-fixed term the ball's distances support, beyond the frame-fixed contour.
 
 The residual ``e = rho - |p(phi)|`` of the raw camera fixes against the nominal ball-centre
 curve (as ``ball_distance_frame_vs_world.py``) is fitted by the frame-fixed harmonics of the
@@ -17,8 +17,8 @@ Run from the repository root: ``python docs/notes/issue-12-scripts/camera_terms.
 from __future__ import annotations
 
 import numpy as np
+from ball_distance_frame_vs_world import distances  # this folder's other script
 from bfr_model.geometry import OffsetCurve
-from bfr_model.io import read_runs
 from bfr_model.params import load_params
 
 LOGS = ("fin", "Actually_worked", "rolling_data")
@@ -32,13 +32,7 @@ def main() -> None:
     """Print one line per log."""
     curve = OffsetCurve.from_params(load_params())
     for name in LOGS:
-        run = max(read_runs(f"../shared/data/ntnu-rig/{name}.txt"), key=lambda r: r.n)
-        ok = run.ball_valid.astype(bool) & np.asarray(run.new_fix_mask(), bool)
-        x, y, theta = run.ball_x[ok], run.ball_y[ok], run.theta[ok]
-        rho = np.hypot(x, y)
-        beta = np.arctan2(x, y)
-        psi = theta + beta
-        e = rho - np.linalg.norm(curve.point(curve.phi_from_ball_angle(psi)), axis=-1)
+        rho, beta, psi, e = distances(name, curve)
         r = rho / 0.1
         cols = [np.ones_like(e), np.cos(beta), np.sin(beta), r]
         for k in range(1, 9):
