@@ -617,12 +617,11 @@ class SimulatorNode(Node):
                         f"running {now - target:.2f} s behind real time: the machine "
                         f"cannot keep up; dropping the lag", throttle_duration_sec=5.0)
                     wall_base, t_base = now, self.sim.t_ns
-                if now < target:
-                    while now < target and not stop:  # the wait serves what arrives in it
-                        ex.spin_once(timeout_sec=target - now)
-                        now = time.monotonic()
-                else:  # behind: no wait, so take what has arrived (one empty spin ~60 us)
+                if now >= target:  # behind: no wait, so take what has arrived
                     self.take_messages()
+                while now < target and not stop:  # the wait serves what arrives in it
+                    ex.spin_once(timeout_sec=target - now)
+                    now = time.monotonic()
             if self.duration_ns and self.sim.t_ns >= self.duration_ns:
                 self.finished = True
                 break
