@@ -9,6 +9,7 @@ rclpy's deserialisation field by field.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import random
 import subprocess
@@ -50,6 +51,8 @@ def wait_exit(proc: rosutil.NodeProcess, timeout: float = 60.0) -> int:
      "unknown parameter for node /camera: detector.n_ray (did you mean detector.n_rays"),
     ("bfr_control", "controller_node", ["-p", "actuator.torque_limit:=1e9"],
      "actuator.torque_limit"),
+    ("bfr_camera", "camera_node", ["-p", "process.realtime_priority:=120"],
+     "process.realtime_priority: must be an integer 0-98"),
 ])
 def test_bad_parameters_stop_the_node_with_one_line(node_processes, package: str, exe: str,  # noqa: ANN001
                                                     args: list[str], message: str) -> None:
@@ -90,6 +93,38 @@ def test_startup_parameters_are_read_only(ros_harness: rosutil.RosHarness,
     assert not result.successful
     assert "read-only" in result.reason and "actuator.torque_limit" in result.reason
     assert ctl.alive
+
+
+def _thread_scheduling(pid: int) -> set[tuple[int, int]]:
+    out = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with contextlib.suppress(ProcessLookupError):
+            out.add((os.sched_getscheduler(int(tid)),
+                     os.sched_getparam(int(tid)).sched_priority))
+    return out
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setscheduler"), reason="no POSIX scheduling API")
+def test_nodes_run_at_their_realtime_priority(ros_harness: rosutil.RosHarness,
+                                              node_processes) -> None:  # noqa: ANN001
+    """Every thread of the controller at process.realtime_priority under SCHED_FIFO (or, where
+    this user may not, a warning that says why and the normal scheduler throughout)."""
+    ctl = node_processes.start("bfr_control", "controller_node",
+                               ros_args=["-p", "process.realtime_priority:=21"])
+    cam = node_processes.start("bfr_camera", "camera_node",
+                               ros_args=["-p", "process.realtime_priority:=0"])
+    assert ros_harness.spin_until(lambda: "mode WAITING" in ctl.output()
+                                  and "scheduling:" in cam.output(), timeout=60)
+    assert "scheduling: normal (process.realtime_priority 0)" in cam.output()
+    assert _thread_scheduling(cam.process.pid) == {(os.SCHED_OTHER, 0)}
+    threads = _thread_scheduling(ctl.process.pid)
+    if "SCHED_FIFO priority 21 (" in ctl.output():
+        assert threads == {(os.SCHED_FIFO, 21)}, threads
+    else:
+        warn = [line for line in ctl.output().splitlines() if "[WARN]" in line
+                and "SCHED_FIFO priority 21 refused" in line]
+        assert warn and "ulimit -r" in warn[0], ctl.output()[-2000:]
+        assert threads == {(os.SCHED_OTHER, 0)}, threads
 
 
 def test_log_lines_name_the_resolved_topics(ros_harness: rosutil.RosHarness,

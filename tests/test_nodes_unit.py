@@ -4,6 +4,7 @@ actuator and schedule, the camera's theta buffer, the rig's orbit start and the 
 from __future__ import annotations
 
 import ast
+import json
 import math
 import os
 import subprocess
@@ -16,7 +17,7 @@ import pytest
 from bfr_camera.camera_node import ThetaBuffer
 from bfr_camera.camera_node import node_defaults as camera_defaults
 from bfr_model.params import load_params
-from bfr_ros.node_common import _cast, flatten, image_to_array, unflatten
+from bfr_ros.node_common import _cast, flatten, image_to_array, realtime_scheduling, unflatten
 from bfr_sim.simulator_node import RigSimulation, Schedule
 from bfr_sim.simulator_node import node_defaults as sim_defaults
 from bfr_tools.rig import orbit_start, set_autogroup_nice
@@ -182,6 +183,79 @@ def test_schedule_on_the_step_grid() -> None:
         assert n == expect
     with pytest.raises(ValueError, match="must be > 0"):
         Schedule(0.0, step, "joint_states.rate")
+
+
+# -- real-time scheduling of a node's threads ------------------------------------------------
+#: Run in a child process (the test process itself must not become real-time): threads made
+#: before the call, the call, a thread made after it; prints what each thread runs under.
+_SCHED_CHILD = """
+import json, os, sys, threading, time
+from bfr_ros.node_common import realtime_scheduling
+if len(sys.argv) > 2:  # drop root: an unprivileged user with no real-time limit
+    os.setgid(65534); os.setuid(65534)
+stop = threading.Event()
+early = [threading.Thread(target=stop.wait) for _ in range(3)]
+for t in early: t.start()
+applied, text = realtime_scheduling(int(sys.argv[1]))
+late = threading.Thread(target=stop.wait); late.start()
+time.sleep(0.05)
+tasks = {int(t): (os.sched_getscheduler(int(t)), os.sched_getparam(int(t)).sched_priority)
+         for t in os.listdir("/proc/self/task")}
+stop.set()
+print(json.dumps({"applied": applied, "text": text, "tasks": list(tasks.values()),
+                  "late": tasks[late.native_id]}))
+"""
+
+
+def _sched_child(*args: str) -> dict:
+    out = subprocess.run([sys.executable, "-c", _SCHED_CHILD, *args], capture_output=True,
+                         text=True, timeout=60, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _may_use_fifo() -> bool:
+    try:
+        out = subprocess.run([sys.executable, "-c", "import os; os.sched_setscheduler("
+                              "0, os.SCHED_FIFO, os.sched_param(1))"], check=False,
+                             capture_output=True, timeout=30)
+    except (OSError, subprocess.TimeoutExpired):
+        return False
+    return out.returncode == 0
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setscheduler"), reason="no POSIX scheduling API")
+def test_realtime_scheduling_switches_every_thread() -> None:
+    if not _may_use_fifo():
+        pytest.skip("this user may not use SCHED_FIFO (no CAP_SYS_NICE, ulimit -r 0)")
+    got = _sched_child("7")
+    assert got["applied"], got["text"]
+    assert "SCHED_FIFO priority 7" in got["text"]
+    # every thread: the main one, the three made before the call, the one made after it
+    assert len(got["tasks"]) >= 5
+    assert all(t == [os.SCHED_FIFO, 7] for t in got["tasks"]), got["tasks"]
+    assert got["late"] == [os.SCHED_FIFO, 7]
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setscheduler"), reason="no POSIX scheduling API")
+def test_realtime_scheduling_zero_leaves_the_normal_scheduler() -> None:
+    got = _sched_child("0")
+    assert not got["applied"] and "normal" in got["text"]
+    assert all(t == [os.SCHED_OTHER, 0] for t in got["tasks"]), got["tasks"]
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid") or os.geteuid() != 0,
+                    reason="needs root to run the child as an unprivileged user")
+def test_realtime_scheduling_refused_says_why_and_changes_nothing() -> None:
+    got = _sched_child("40", "unprivileged")
+    assert not got["applied"]
+    assert "refused" in got["text"] and "CAP_SYS_NICE" in got["text"], got["text"]
+    assert all(t == [os.SCHED_OTHER, 0] for t in got["tasks"]), got["tasks"]
+
+
+@pytest.mark.parametrize("bad", [-1, 99, 1000])
+def test_realtime_scheduling_rejects_out_of_range(bad: int) -> None:
+    with pytest.raises(ValueError, match=r"process\.realtime_priority: must be an integer 0-98"):
+        realtime_scheduling(bad)
 
 
 # -- rig: start on the orbit, the launch file ---------------------------------------------------

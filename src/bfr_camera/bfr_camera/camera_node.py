@@ -67,6 +67,7 @@ from bfr_ros.node_common import (
     ns_to_stamp,
     parse_joint_state,
     read_parameter_tree,
+    realtime_scheduling,
     run_node,
 )
 from rclpy.node import Node
@@ -188,6 +189,9 @@ class CameraNode(Node):
         self.track = ball_track(params_from_dict({k: p[k] for k in RIG_GROUPS if k in p}))
         self.detector = self._make_detector(self.camera)
         warm = self.detector.warm_up()  # the compiled kernels loaded now, not at the 1st fix
+        # after the warm-up: a cold compile does not hold a CPU at real-time priority
+        self.realtime, self.scheduling = realtime_scheduling(
+            int(p["process"]["realtime_priority"]), self.get_logger())
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])
         self.joint_name = str(inp["joint_name"])
@@ -236,7 +240,8 @@ class CameraNode(Node):
             f"{1e3 * self.ball_radius:.1f} mm, ROI "
             f"{'on' if self.detector_config.use_roi else 'off'}, detector warmed up in "
             f"{1e3 * warm:.0f} ms, pose "
-            f"{[round(v, 4) for v in self.camera_params['position']]} m; {calib}")
+            f"{[round(v, 4) for v in self.camera_params['position']]} m; {calib}; "
+            f"{self.scheduling}")
 
     def _make_detector(self, cam: CameraModel) -> BallDetector:
         det = BallDetector(cam, self.ball_radius, self.detector_config)

@@ -76,6 +76,7 @@ from bfr_ros.node_common import (
     load_yaml_parameters,
     parse_joint_state,
     read_parameter_tree,
+    realtime_scheduling,
     run_node,
     stamp_to_ns,
 )
@@ -149,6 +150,9 @@ class ControllerNode(Node):
         t0 = time.perf_counter()
         self.ctrl = OrbitalController(model, config)
         self._warm_up()
+        # after the warm-up: a cold compile does not hold a CPU at real-time priority
+        self.realtime, self.scheduling = realtime_scheduling(
+            int(p["process"]["realtime_priority"]), self.get_logger())
         setup = time.perf_counter() - t0
         loop, safety = p["loop"], p["safety"]
         self.trigger = str(loop["trigger"]).lower()
@@ -222,7 +226,7 @@ class ControllerNode(Node):
             f"{'measured + ' if self.predict else 'not predicted; '}"
             f"{1e3 * self.actuation_delay:g} ms, orbit mean phi_dot "
             f"{self.ctrl.orbit.summary().get('mean_phi_dot', float('nan')):.3g} rad/s, "
-            f"set up in {setup:.2f} s; mode WAITING (no ball yet)")
+            f"set up in {setup:.2f} s; mode WAITING (no ball yet); {self.scheduling}")
 
     def _warm_up(self) -> None:
         """Run the core on a synthetic rolling ball, then reset it.

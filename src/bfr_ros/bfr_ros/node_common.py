@@ -27,6 +27,7 @@ from __future__ import annotations
 import difflib
 import gc
 import math
+import os
 import signal
 import struct
 import sys
@@ -76,6 +77,7 @@ __all__ = [
     "parse_joint_state",
     "parse_published",
     "read_parameter_tree",
+    "realtime_scheduling",
     "run_node",
     "stamp_to_ns",
     "unflatten",
@@ -421,6 +423,77 @@ class PolledSubscription:
         if self.handle is not None:
             self.handle.destroy_when_not_in_use()
             self.handle = None
+
+
+def realtime_scheduling(priority: int, logger: Any = None,
+                        not_now: str = "") -> tuple[bool, str]:
+    """Run every thread of this process under ``SCHED_FIFO`` at ``priority`` (0: unchanged).
+
+    A control loop on a general-purpose Linux machine is only as punctual as the scheduler
+    lets it be: beside four busy processes the controller node of a real-time run was not
+    scheduled for 100 ms at the orbit's fast turn, the drive held a stale torque and the ball
+    was lost (docs/notes/issue-17.md). Under ``SCHED_FIFO`` a runnable thread preempts every
+    normal (``SCHED_OTHER``) thread, whatever the niceness and the session groups of the
+    others; the kernel's real-time throttling (``/proc/sys/kernel/sched_rt_runtime_us``, 95 %
+    by default) still leaves the rest of the machine some CPU. This is what ros2_control's
+    controller manager does for its update thread (``thread_priority``, default 50).
+
+    Every thread that exists now is switched (the DDS threads made with the node receive and
+    hand over the messages the loop waits for); threads started later inherit the policy of
+    the thread that starts them. All or nothing: if the first thread is refused, none is
+    changed.
+
+    Parameters
+    ----------
+    priority : int
+        ``SCHED_FIFO`` priority 1-98 (higher preempts lower), 0 for the normal scheduler.
+    logger : rclpy logger, optional
+        Warned once (the description) when the priority is refused.
+    not_now : str
+        If given, the priority is only checked and the normal scheduler kept, for this
+        reason (e.g. a simulator in lock-step: no deadline).
+
+    Returns
+    -------
+    applied : bool
+        True if the threads now run under ``SCHED_FIFO`` at ``priority``.
+    description : str
+        For the node's start-up log: what was applied, or why not (the missing privilege:
+        ``CAP_SYS_NICE`` or a real-time priority limit, ``ulimit -r``).
+
+    Raises
+    ------
+    ValueError
+        If ``priority`` is outside 0-98.
+    """
+    if not (isinstance(priority, int) and 0 <= priority <= 98):
+        raise ValueError(f"process.realtime_priority: must be an integer 0-98 (0: the normal "
+                         f"scheduler), got {priority!r}")
+    if priority == 0 or not_now:
+        return False, f"scheduling: normal ({not_now or 'process.realtime_priority 0'})"
+    if not hasattr(os, "sched_setscheduler"):
+        return False, "scheduling: normal (SCHED_FIFO is not available on this system)"
+    tids = sorted(int(t) for t in os.listdir("/proc/self/task"))
+    tids.remove(threading.get_native_id())
+    param = os.sched_param(priority)
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, param)  # the calling thread first
+    except OSError as exc:
+        why = (f"scheduling: normal; SCHED_FIFO priority {priority} refused ({exc.strerror}: "
+               f"needs CAP_SYS_NICE or a real-time priority limit, ulimit -r {priority}); "
+               f"on a busy machine the loop's timing is not guaranteed")
+        if logger is not None:
+            logger.warn(why)
+        return False, why
+    switched = 1
+    for tid in tids:
+        try:
+            os.sched_setscheduler(tid, os.SCHED_FIFO, param)
+            switched += 1
+        except ProcessLookupError:  # the thread ended meanwhile
+            continue
+    return True, (f"scheduling: SCHED_FIFO priority {priority} ({switched} threads; "
+                  f"process.realtime_priority)")
 
 
 def freeze_heap() -> None:

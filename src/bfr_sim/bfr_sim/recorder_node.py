@@ -41,6 +41,7 @@ from bfr_ros.node_common import (
     format_published,
     load_yaml_parameters,
     read_parameter_tree,
+    realtime_scheduling,
     run_node,
 )
 from rclpy.node import Node
@@ -82,7 +83,10 @@ class RecorderNode(Node):
         super().__init__("recorder")
         self.defaults = node_defaults()
         declare_parameter_tree(self, self.defaults)
-        p = read_parameter_tree(self, self.defaults)["recorder"]
+        tree = read_parameter_tree(self, self.defaults)
+        self.realtime, self.scheduling = realtime_scheduling(
+            int(tree["process"]["realtime_priority"]), self.get_logger())
+        p = tree["recorder"]
         path = str(p["path"]) or datetime.now().strftime("bfr_%Y%m%d_%H%M%S")
         self.depth = int(p["depth"])
         self.drain_quiet = float(p["drain_quiet"])
@@ -107,7 +111,7 @@ class RecorderNode(Node):
         self.executor_ref: Any = None
         self.get_logger().info(
             f"recording {len(self.wanted)} topic(s) into {self.bag.path}: "
-            + ", ".join(sorted(self.wanted)))
+            + ", ".join(sorted(self.wanted)) + f"; {self.scheduling}")
 
     def _subscribe(self, topic: str, type_name: str, reliable: bool = True) -> None:
         try:

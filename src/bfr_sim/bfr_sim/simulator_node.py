@@ -80,6 +80,7 @@ from bfr_ros.node_common import (
     load_yaml_parameters,
     ns_to_stamp,
     read_parameter_tree,
+    realtime_scheduling,
     run_node,
     stamp_to_ns,
 )
@@ -294,6 +295,11 @@ class SimulatorNode(Node):
         s = p["sim"]
         self.mode = str(s["mode"]).lower()
         one_of("sim.mode", self.mode, ("realtime", "lockstep"))
+        # real-time priority only where there is a deadline: lock-step runs as fast as its
+        # peers answer and would hold a CPU against every normal process
+        self.realtime, self.scheduling = realtime_scheduling(
+            int(p["process"]["realtime_priority"]), self.get_logger(),
+            not_now="" if self.mode == "realtime" else "lock-step mode has no deadline")
         self.rtf = float(s["real_time_factor"])
         positive("sim.real_time_factor", self.rtf)
         self.duration_ns = round(max(float(s["duration"]), 0.0) * _NS)
@@ -377,7 +383,8 @@ class SimulatorNode(Node):
             f"{self.js_sched.rate:g} Hz, camera {self.camera.frame_rate:g} Hz "
             f"{self.camera.width}x{self.camera.height} mono8, truth "
             f"{truth}, torque limit "
-            f"{self.sim.limit:g} N m, start x0 = {np.round(self.sim.x[:4], 4).tolist()}")
+            f"{self.sim.limit:g} N m, start x0 = {np.round(self.sim.x[:4], 4).tolist()}; "
+            f"{self.scheduling}")
 
     # -- subscriptions --------------------------------------------------------------
     def _on_command(self, msg: Any) -> None:
