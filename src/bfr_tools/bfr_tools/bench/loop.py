@@ -411,7 +411,10 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
         "cpu_camera_controller": (
             "user + system CPU seconds of the camera and controller processes (/proc) per "
             "simulated second of the window (sim_truth stamps); joint_states 1 kHz, camera "
-            f"200 Hz 640x480 mono8; load {load0:.2f} at start"),
+            f"200 Hz 640x480 mono8; load {load0:.2f} at start; the nodes at their default "
+            f"process.realtime_priority (SCHED_FIFO where permitted: a thread woken at once "
+            f"for each message costs ~0.1 cores more here than the normal scheduler's "
+            f"batching, docs/notes/issue-17.md)"),
         "real_time_factor": "simulated seconds (sim_truth stamps) per wall-clock second",
     }
     figs = []
