@@ -55,14 +55,12 @@ from bfr_diagnose.null import (
     thresholds_of,
 )
 from bfr_diagnose.preprocess import Piece, Prepared, PrepConfig, SensorCorrection, plan_parts
-from bfr_diagnose.residual import Residual, ResidualConfig, ResidualEvaluator
+from bfr_diagnose.residual import ROW_NAMES, ROW_UNITS, Residual, ResidualConfig, ResidualEvaluator
 
 __all__ = ["DiagnoseOptions", "Diagnosis", "PartResult", "diagnose_recording",
            "diagnose_recordings"]
 
 Say = Callable[[str], None]  # ``progress(str)``: where progress messages go
-ROW_NAMES = {1: "frame_torque_row", 2: "ball_row", 3: "ball_distance_row"}
-ROW_UNITS = {1: "N m", 2: "N m", 3: "m"}
 
 
 @dataclass(kw_only=True)

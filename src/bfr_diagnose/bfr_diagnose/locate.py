@@ -30,7 +30,7 @@ from numpy.typing import NDArray
 from scipy.stats import chi2
 
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
-from bfr_diagnose.residual import Residual
+from bfr_diagnose.residual import ROW_NAMES, Residual
 
 __all__ = ["ljung_box", "locate", "prediction_errors", "rms_by_block"]
 
@@ -109,7 +109,6 @@ class _Row:
     msq: FloatArray     # [N^2 m^2]
 
 
-_ROW_NAMES = {1: "frame_torque_row", 2: "ball_row", 3: "ball_distance_row"}
 
 
 def _rows_under_null(res: Residual, sigma: Any, msq: Any,
@@ -122,7 +121,7 @@ def _rows_under_null(res: Residual, sigma: Any, msq: Any,
             return np.asarray(msq[i], float)
         return np.full(idx.size, float(sigma[i]) ** 2)
 
-    return {_ROW_NAMES[r]: _Row(r=res.rows[r - 1], msq=expected(r - 1)) for r in rows}
+    return {ROW_NAMES[r]: _Row(r=res.rows[r - 1], msq=expected(r - 1)) for r in rows}
 
 
 def _tested(rows: dict[str, _Row], m: NDArray[np.bool_], tau: float) -> dict[str, Any]:

@@ -80,8 +80,13 @@ from numpy.typing import NDArray
 
 from bfr_diagnose.preprocess import Prepared, SensorCorrection, segments_from_mask
 
-__all__ = ["Residual", "ResidualConfig", "ResidualEvaluator", "kernel_pair", "pointwise_terms",
-           "usable_half_width"]
+#: The equation rows by number: the frame's torque balance, the ball's, the ball's distance.
+ROW_NAMES = {1: "frame_torque_row", 2: "ball_row", 3: "ball_distance_row"}
+#: Their units.
+ROW_UNITS = {1: "N m", 2: "N m", 3: "m"}
+
+__all__ = ["ROW_NAMES", "ROW_UNITS", "Residual", "ResidualConfig", "ResidualEvaluator",
+           "kernel_pair", "pointwise_terms", "usable_half_width"]
 
 FloatArray = NDArray[np.float64]
 
