@@ -36,7 +36,9 @@ Modes (``sim.mode``)
     its torque, then applies it from ``t`` on. The answer to frame ``t`` is therefore
     computed from exactly the data up to ``t``, whatever the machine's load: runs are
     repeatable. A controller that does not answer within ``lockstep.timeout`` (wall time)
-    counts as absent; the simulation then runs free (no waiting) until a
+    counts as absent; the simulation then runs free, paced at ``sim.real_time_factor`` as
+    in real-time mode (as a rig runs on without its controller; flat out, it flooded the
+    camera node with frames it had to measure at its real-time priority), until a
     ``controller_state`` arrives again, so a dead controller never freezes it.
 
 The effort command: one element (``joint_states.joint_name``), clamped to
@@ -609,14 +611,18 @@ class SimulatorNode(Node):
         lock = self.mode == "lockstep"
         wall0 = time.monotonic()
         wall_base, t_base = wall0, 0
+        paced = not lock  # the last step was paced by the wall clock
         was_timed_out = False
         self.get_logger().info("simulation started")
         while not stop:
             frame_out = self.publish_due()
-            if lock:
-                if frame_out:
-                    self.wait_for_answer(stop)
-            else:
+            if lock and frame_out:
+                self.wait_for_answer(stop)
+            if lock and not self.controller_absent:
+                paced = False
+            else:  # real time, or lock-step without its controller: paced by the wall clock
+                if not paced:
+                    wall_base, t_base, paced = time.monotonic(), self.sim.t_ns, True
                 target = wall_base + (self.sim.t_ns - t_base) / _NS / self.rtf
                 now = time.monotonic()
                 if now - target > 1.0:
