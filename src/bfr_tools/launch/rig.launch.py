@@ -76,6 +76,8 @@ def _nodes(context: Any) -> list[Any]:
                          "start.wait_observation_subscribers": 1 + rec,
                          "start.settle": 2.0 if rec else 0.5, **start}]))
         sim_time = {"use_sim_time": True}
+        if arg("mode") == "lockstep":  # no wall-clock deadline: the normal scheduler
+            sim_time["process.realtime_priority"] = 0
         nodes.append(Node(
             package="bfr_camera", executable="camera_node", name="camera", output="screen",
             parameters=[camera, rig, camera_node, sim_time]))
