@@ -44,6 +44,7 @@ from bfr_ros.node_common import (
     realtime_scheduling,
     run_node,
 )
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
@@ -101,12 +102,16 @@ class RecorderNode(Node):
         self.last_msg = time.monotonic()
         self.types: dict[str, str] = {}
         self.counts: dict[str, int] = {}
+        self.matched: set[str] = set()  # topics with a matched publisher (logged once)
         for resolved, name in self.wanted.items():
             known = CONTRACT_TYPES.get(name.lstrip("/")) or CONTRACT_TYPES.get(
                 resolved.lstrip("/"))
             if known is not None:
                 self._subscribe(resolved, known)
-        self.create_timer(float(p["discovery_period"]), self._discover)
+        # on the steady clock: under use_sim_time the node's clock stands still until /clock
+        # comes, and the topics must be found and matched before the simulation starts
+        self.create_timer(float(p["discovery_period"]), self._discover,
+                          clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.t_start = time.monotonic()
         self.executor_ref: Any = None
         self.get_logger().info(
@@ -151,6 +156,11 @@ class RecorderNode(Node):
 
     def _discover(self) -> None:
         self._adapt_qos()
+        for topic, sub in self.subs.items():  # "matched" lines: bfr rig starts the
+            n = sub.get_publisher_count()      # simulation once the loop's topics have them
+            if n and topic not in self.matched:
+                self.matched.add(topic)
+                self.get_logger().info(f"matched {topic}: {n} publisher(s)")
         missing = [t for t in self.wanted if t not in self.subs]
         if not missing:
             return

@@ -187,6 +187,37 @@ def _describe_exit(code: int) -> str:
     return f"exit status {code}"
 
 
+#: The camera's and controller's topics the recorder must have matched before the simulation
+#: starts (the simulator's own topics are held by its start gate, ``start.wait_*``).
+RECORDER_MATCH_TOPICS = ("/ball_observation", "/controller_state", "/effort_controller/commands")
+
+
+def _wait_recorder_matched(recorder: NodeSpec, topics: tuple[str, ...],
+                           timeout: float = 30.0) -> bool:
+    """Wait until the recorder's log says it matched a publisher on each of ``topics``.
+
+    A reliable, volatile subscription gets nothing its publisher sent before the two matched,
+    and matching can lag discovery by seconds: the recorder once missed the controller's first
+    0.125 s (25 states) although it had subscribed 2 s before the simulation started
+    (docs/notes/issue-17.md). The simulator starts only after this (or after ``timeout``
+    seconds, with a note).
+    """
+    t0 = time.monotonic()
+    want = [f"matched {t}:" for t in topics]
+    while time.monotonic() - t0 < timeout:
+        text = (recorder.log_path.read_text(errors="replace")
+                if recorder.log_path is not None and recorder.log_path.exists() else "")
+        if all(w in text for w in want):
+            return True
+        if recorder.returncode is not None:
+            return False
+        time.sleep(0.1)
+    print(f"bfr rig: note: the recorder had not matched {', '.join(topics)} within "
+          f"{timeout:g} s; starting the simulation anyway (the bag may miss their start)",
+          flush=True)
+    return False
+
+
 def set_autogroup_nice(pid: int, nice: int) -> bool:
     """Set the niceness of the scheduler autogroup of ``pid``'s session; False if not possible.
 
@@ -612,6 +643,8 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
     interrupted = False
     try:
         for n in order:
+            if n == "simulator" and "recorder" in nodes:
+                _wait_recorder_matched(nodes["recorder"], RECORDER_MATCH_TOPICS)
             nodes[n].start(log_dir, env, nice)
             print(f"bfr rig: started {n} ({nodes[n].package}/{nodes[n].executable}, pid "
                   f"{nodes[n].process.pid})", flush=True)  # type: ignore[union-attr]
