@@ -190,7 +190,7 @@ class CameraNode(Node):
         self.detector = self._make_detector(self.camera)
         warm = self.detector.warm_up()  # the compiled kernels loaded now, not at the 1st fix
         # after the warm-up: a cold compile does not hold a CPU at real-time priority
-        self.realtime, self.scheduling = realtime_scheduling(
+        _, self.scheduling = realtime_scheduling(
             int(p["process"]["realtime_priority"]), self.get_logger())
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])

@@ -151,7 +151,7 @@ class ControllerNode(Node):
         self.ctrl = OrbitalController(model, config)
         self._warm_up()
         # after the warm-up: a cold compile does not hold a CPU at real-time priority
-        self.realtime, self.scheduling = realtime_scheduling(
+        _, self.scheduling = realtime_scheduling(
             int(p["process"]["realtime_priority"]), self.get_logger())
         setup = time.perf_counter() - t0
         loop, safety = p["loop"], p["safety"]

@@ -85,7 +85,7 @@ class RecorderNode(Node):
         self.defaults = node_defaults()
         declare_parameter_tree(self, self.defaults)
         tree = read_parameter_tree(self, self.defaults)
-        self.realtime, self.scheduling = realtime_scheduling(
+        _, self.scheduling = realtime_scheduling(
             int(tree["process"]["realtime_priority"]), self.get_logger())
         p = tree["recorder"]
         path = str(p["path"]) or datetime.now().strftime("bfr_%Y%m%d_%H%M%S")

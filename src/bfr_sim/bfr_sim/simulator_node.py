@@ -299,7 +299,7 @@ class SimulatorNode(Node):
         one_of("sim.mode", self.mode, ("realtime", "lockstep"))
         # real-time priority only where there is a deadline: lock-step runs as fast as its
         # peers answer and would hold a CPU against every normal process
-        self.realtime, self.scheduling = realtime_scheduling(
+        _, self.scheduling = realtime_scheduling(
             int(p["process"]["realtime_priority"]), self.get_logger(),
             not_now="" if self.mode == "realtime" else "lock-step mode has no deadline")
         self.rtf = float(s["real_time_factor"])

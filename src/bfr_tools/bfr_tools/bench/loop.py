@@ -413,8 +413,8 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
             "simulated second of the window (sim_truth stamps); joint_states 1 kHz, camera "
             f"200 Hz 640x480 mono8; load {load0:.2f} at start; the nodes at their default "
             f"process.realtime_priority (SCHED_FIFO where permitted: a thread woken at once "
-            f"for each message costs ~0.1 cores more here than the normal scheduler's "
-            f"batching, docs/notes/issue-17.md)"),
+            f"for each message instead of batched with the next; its price on this machine: "
+            f"docs/notes/issue-17.md)"),
         "real_time_factor": "simulated seconds (sim_truth stamps) per wall-clock second",
     }
     figs = []
