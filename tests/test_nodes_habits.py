@@ -53,6 +53,13 @@ def wait_exit(proc: rosutil.NodeProcess, timeout: float = 60.0) -> int:
      "actuator.torque_limit"),
     ("bfr_camera", "camera_node", ["-p", "process.realtime_priority:=120"],
      "process.realtime_priority: must be an integer 0-98"),
+    ("bfr_camera", "camera_node", ["-p", "process.cpu:=4096"],
+     "process.cpu: CPU 4096 is not available to this process"),
+    # composed: a name neither node knows stops the process; one node's name is accepted
+    # by the other (a -p reaches both nodes of a process)
+    ("bfr_tools", "loop_node", ["-p", "loop.trigerr:=joint_states",
+                                  "-p", "input.frame_timeout:=2.0"],
+     "unknown parameter for node /camera: loop.trigerr (did you mean loop.trigger?)"),
 ])
 def test_bad_parameters_stop_the_node_with_one_line(node_processes, package: str, exe: str,  # noqa: ANN001
                                                     args: list[str], message: str) -> None:
@@ -125,6 +132,50 @@ def test_nodes_run_at_their_realtime_priority(ros_harness: rosutil.RosHarness,
                 and "SCHED_FIFO priority 21 refused" in line]
         assert warn and "ulimit -r" in warn[0], ctl.output()[-2000:]
         assert threads == {(os.SCHED_OTHER, 0)}, threads
+
+
+def _thread_cpus(pid: int) -> set[tuple[int, ...]]:
+    out = set()
+    for tid in os.listdir(f"/proc/{pid}/task"):
+        with contextlib.suppress(ProcessLookupError):
+            out.add(tuple(sorted(os.sched_getaffinity(int(tid)))))
+    return out
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity API")
+def test_composed_loop_runs_both_nodes_in_one_pinned_process(
+        ros_harness: rosutil.RosHarness, node_processes, tmp_path: Path) -> None:  # noqa: ANN001
+    """``loop_node``: the camera and controller nodes in one process, placed once (the higher
+    priority, the CPU), each reading its own section of a parameter file."""
+    cpu = max(os.sched_getaffinity(0))
+    scoped = tmp_path / "loop.yaml"
+    scoped.write_text("camera:\n  ros__parameters:\n    process.realtime_priority: 22\n"
+                      "controller:\n  ros__parameters:\n    process.realtime_priority: 21\n"
+                      f"    process.cpu: {cpu}\n")
+    loop = node_processes.start("bfr_tools", "loop_node",
+                                ros_args=["--params-file", str(scoped)])
+    assert ros_harness.spin_until(lambda: loop.output().count("composed with camera, "
+                                                              "controller") == 2, timeout=60)
+    names = set(ros_harness.node.get_node_names())
+    assert {"camera", "controller"} <= names, names
+    out = loop.output()
+    assert f"CPU {cpu} only (" in out
+    assert _thread_cpus(loop.process.pid) == {(cpu,)}
+    if "SCHED_FIFO priority 22 (" in out:  # the higher of the two, for every thread
+        assert _thread_scheduling(loop.process.pid) == {(os.SCHED_FIFO, 22)}
+    else:
+        assert "SCHED_FIFO priority 22 refused" in out, out[-2000:]
+    # two CPUs named for one process: refused at start
+    other = min(os.sched_getaffinity(0))
+    if other != cpu:
+        clash = tmp_path / "clash.yaml"
+        clash.write_text(f"camera:\n  ros__parameters:\n    process.cpu: {other}\n"
+                         f"controller:\n  ros__parameters:\n    process.cpu: {cpu}\n")
+        bad = node_processes.start("bfr_tools", "loop_node",
+                                   ros_args=["--params-file", str(clash)])
+        assert wait_exit(bad) == 2
+        assert (f"the nodes of one process name different CPUs (camera {other}, controller "
+                f"{cpu})") in bad.output()
 
 
 def test_log_lines_name_the_resolved_topics(ros_harness: rosutil.RosHarness,

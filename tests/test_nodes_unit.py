@@ -14,10 +14,18 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+import yaml
 from bfr_camera.camera_node import ThetaBuffer
 from bfr_camera.camera_node import node_defaults as camera_defaults
 from bfr_model.params import load_params
-from bfr_ros.node_common import _cast, flatten, image_to_array, realtime_scheduling, unflatten
+from bfr_ros.node_common import (
+    _cast,
+    flatten,
+    image_to_array,
+    place_process,
+    realtime_scheduling,
+    unflatten,
+)
 from bfr_sim.simulator_node import RigSimulation, Schedule
 from bfr_sim.simulator_node import node_defaults as sim_defaults
 from bfr_tools.rig import orbit_start, set_autogroup_nice
@@ -256,6 +264,104 @@ def test_realtime_scheduling_refused_says_why_and_changes_nothing() -> None:
 def test_realtime_scheduling_rejects_out_of_range(bad: int) -> None:
     with pytest.raises(ValueError, match=r"process\.realtime_priority: must be an integer 0-98"):
         realtime_scheduling(bad)
+
+
+# -- pinning a node's threads to one CPU ------------------------------------------------------
+_PIN_CHILD = """
+import json, os, sys, threading, time
+from bfr_ros.node_common import pin_threads
+stop = threading.Event()
+early = [threading.Thread(target=stop.wait) for _ in range(3)]
+for t in early: t.start()
+before = sorted(os.sched_getaffinity(0))
+try:
+    text = pin_threads(int(sys.argv[1]))
+except ValueError as exc:
+    text = "ValueError: " + str(exc)
+late = threading.Thread(target=stop.wait); late.start()
+time.sleep(0.05)
+tasks = {int(t): sorted(os.sched_getaffinity(int(t))) for t in os.listdir("/proc/self/task")}
+stop.set()
+print(json.dumps({"text": text, "before": before, "tasks": list(tasks.values()),
+                  "late": tasks[late.native_id]}))
+"""
+
+
+def _pin_child(cpu: int) -> dict:
+    out = subprocess.run([sys.executable, "-c", _PIN_CHILD, str(cpu)], capture_output=True,
+                         text=True, timeout=60, check=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity API")
+def test_pin_threads_pins_every_thread_and_later_ones() -> None:
+    cpu = max(os.sched_getaffinity(0))
+    got = _pin_child(cpu)
+    assert got["text"].startswith(f"CPU {cpu} only (")
+    assert len(got["tasks"]) >= 5  # the main thread, three before the call, one after
+    assert all(t == [cpu] for t in got["tasks"]), got["tasks"]
+    assert got["late"] == [cpu]
+
+
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity API")
+def test_pin_threads_minus_one_and_unknown_cpus() -> None:
+    got = _pin_child(-1)
+    assert got["text"] == "any CPU (process.cpu -1)"
+    assert all(t == got["before"] for t in got["tasks"])
+    absent = max(os.sched_getaffinity(0)) + 1  # a CPU this process may not use
+    got = _pin_child(absent)
+    assert got["text"].startswith(f"ValueError: process.cpu: CPU {absent} is not available")
+    assert all(t == got["before"] for t in got["tasks"])  # nothing changed
+
+
+@pytest.mark.parametrize("bad", [-2, 1.5, True, "1"])
+def test_place_process_rejects_a_bad_cpu_before_any_change(bad: object) -> None:
+    # a priority that would fail if it were applied: the CPU is checked first
+    with pytest.raises(ValueError, match=r"process\.cpu: must be -1 \(any CPU\) or a CPU"):
+        place_process({"realtime_priority": 120, "cpu": bad})
+
+
+def test_composed_process_settings() -> None:
+    from bfr_tools.loop_node import process_settings  # noqa: PLC0415
+
+    def node(name: str, prio: int, cpu: int) -> SimpleNamespace:
+        return SimpleNamespace(get_name=lambda: name,
+                               process={"realtime_priority": prio, "cpu": cpu})
+
+    assert process_settings([node("camera", 40, -1), node("controller", 45, -1)]) == {
+        "realtime_priority": 45, "cpu": -1}
+    assert process_settings([node("camera", 40, 1), node("controller", 0, -1)]) == {
+        "realtime_priority": 40, "cpu": 1}
+    assert process_settings([node("camera", 40, 1), node("controller", 45, 1)])["cpu"] == 1
+    with pytest.raises(ValueError, match=r"name different CPUs \(camera 0, controller 1\)"):
+        process_settings([node("camera", 40, 0), node("controller", 45, 1)])
+
+
+def test_loop_specs_composed_scopes_each_nodes_values(tmp_path: Path) -> None:
+    from bfr_tools.rig import LOOP_NODE, loop_specs  # noqa: PLC0415
+
+    per = {"camera": ["-p", "use_sim_time:=true", "--params-file", "/x/rig.yaml",
+                      "--params-file", "/x/camera.yaml", "-p", "input.frame_timeout:=5.0"],
+           "controller": ["-p", "use_sim_time:=true", "--params-file", "/x/rig.yaml",
+                          "-p", "loop.trigger:=observation", "-p", "estimator.dt:=[1, 2.5]"]}
+    specs = loop_specs(per, composed=True, cpu=1, log_dir=tmp_path)
+    assert list(specs) == ["loop"]
+    spec = specs["loop"]
+    assert (spec.package, spec.executable) == LOOP_NODE and not spec.rename
+    assert "__node:=loop" not in " ".join(spec.command()[1:])
+    files = [spec.ros_args[i + 1] for i, a in enumerate(spec.ros_args) if a == "--params-file"]
+    assert files == ["/x/rig.yaml", "/x/camera.yaml", str(tmp_path / "loop_params.yaml")]
+    scoped = yaml.safe_load((tmp_path / "loop_params.yaml").read_text())
+    assert scoped == {
+        "camera": {"ros__parameters": {"use_sim_time": True, "input.frame_timeout": 5.0,
+                                       "process.cpu": 1}},
+        "controller": {"ros__parameters": {"use_sim_time": True, "loop.trigger": "observation",
+                                           "estimator.dt": [1, 2.5], "process.cpu": 1}}}
+    two = loop_specs(per, composed=False, cpu=-1, log_dir=tmp_path)
+    assert list(two) == ["camera", "controller"]
+    assert two["camera"].ros_args == per["camera"] and two["camera"].rename
+    assert "process.cpu:=0" in loop_specs(per, composed=False, cpu=0,
+                                         log_dir=tmp_path)["controller"].ros_args
 
 
 # -- rig: start on the orbit, the launch file ---------------------------------------------------

@@ -150,3 +150,28 @@ def test_rig_names_a_node_that_dies_early(tmp_path: Path,
     assert "camera node died (exit status 2)" in err
     assert "ball.radius: must be > 0 m, got -1.0" in err  # the end of its log
     assert (tmp_path / "logs" / "camera.log").exists()
+
+
+def test_realtime_rig_runs_the_loop_composed_and_pinned(tmp_path: Path) -> None:
+    """``bfr rig --realtime``: the camera and controller composed in one process (loop_node)
+    pinned to the last CPU; the ball rolls and the recorder loses nothing."""
+    from bfr_tools.rig import loop_cpu_default  # noqa: PLC0415
+
+    log_dir = tmp_path / "logs"
+    args = _parser().parse_args(["--realtime", "--duration", "6", "--log-dir", str(log_dir),
+                                 "--wall-timeout", "300"])
+    summary, _, _, wall = run_rig(args)
+    assert summary is not None
+    print(format_summary(summary, wall))
+    assert summary["kept_rolling"] and summary["rolling_from"] < 0.1, summary
+    assert not (log_dir / "camera.log").exists() and not (log_dir / "controller.log").exists()
+    log = (log_dir / "loop.log").read_text()
+    assert log.count("composed with camera, controller in one process") == 2
+    cpu = loop_cpu_default()
+    assert (f"CPU {cpu} only (" if cpu >= 0 else "any CPU") in log
+    published = summary["published"]
+    for topic in ("/ball_observation", "/controller_state", "/effort_controller/commands",
+                  "/joint_states", "/camera/camera_info", "/sim_truth"):
+        assert summary["topics"][topic]["count"] == published[topic], topic
+    frames = summary["topics"]["/camera/camera_info"]["count"]
+    assert summary["topics"]["/ball_observation"]["count"] >= 0.97 * frames

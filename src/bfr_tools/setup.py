@@ -37,6 +37,7 @@ setup(
         "console_scripts": [
             # "<executable> = bfr_tools.<module>:main",  -> lib/bfr_tools/<executable>
             "bfr = bfr_tools.cli:main",
+            "loop_node = bfr_tools.loop_node:main",
         ],
     },
 )

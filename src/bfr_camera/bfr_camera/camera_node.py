@@ -43,6 +43,7 @@ import bisect
 import math
 import time
 from collections import deque
+from collections.abc import Iterable
 from typing import Any
 
 import cv2
@@ -66,8 +67,8 @@ from bfr_ros.node_common import (
     load_yaml_parameters,
     ns_to_stamp,
     parse_joint_state,
+    place_process,
     read_parameter_tree,
-    realtime_scheduling,
     run_node,
 )
 from rclpy.node import Node
@@ -171,14 +172,24 @@ class ThetaBuffer:
 class CameraNode(Node):
     """ROS 2 wrapper of the ball detector (module docstring)."""
 
-    def __init__(self) -> None:
+    def __init__(self, accepted: Iterable[str] = (), place: bool = True) -> None:
+        """Start the node (``accepted``, ``place``: see :mod:`bfr_tools.loop_node`).
+
+        Parameters
+        ----------
+        accepted : iterable of str
+            Parameter names accepted without use (those of other nodes in this process).
+        place : bool
+            Apply ``process.*`` (priority, CPU) now; False when the process's host does.
+        """
         super().__init__("camera")
         # one frame at a time: OpenCV's worker threads cost more than they save on the
         # detector's calls (they spin after each job: 0.15-0.19 cores of system time here)
         cv2.setNumThreads(1)
         self.defaults = node_defaults()
-        declare_parameter_tree(self, self.defaults)
+        declare_parameter_tree(self, self.defaults, accepted)
         p = read_parameter_tree(self, self.defaults)
+        self.process = p["process"]
         self.camera_params = dict(p["camera"])
         self.camera: CameraModel = camera_from_dict(self.camera_params)
         self.detector_config = detector_config_from_dict(p["detector"])
@@ -190,8 +201,8 @@ class CameraNode(Node):
         self.detector = self._make_detector(self.camera)
         warm = self.detector.warm_up()  # the compiled kernels loaded now, not at the 1st fix
         # after the warm-up: a cold compile does not hold a CPU at real-time priority
-        _, self.scheduling = realtime_scheduling(
-            int(p["process"]["realtime_priority"]), self.get_logger())
+        self.scheduling = (place_process(self.process, self.get_logger()) if place
+                           else "process placed by its host")
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])
         self.joint_name = str(inp["joint_name"])

@@ -58,7 +58,7 @@ import math
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from bfr_model.param_file import check, config_path, nonnegative, one_of
@@ -75,8 +75,8 @@ from bfr_ros.node_common import (
     format_published,
     load_yaml_parameters,
     parse_joint_state,
+    place_process,
     read_parameter_tree,
-    realtime_scheduling,
     run_node,
     stamp_to_ns,
 )
@@ -140,19 +140,29 @@ def guarded(where: str) -> Callable:
 class ControllerNode(Node):
     """ROS 2 wrapper of :class:`OrbitalController` (module docstring)."""
 
-    def __init__(self) -> None:
+    def __init__(self, accepted: Iterable[str] = (), place: bool = True) -> None:
+        """Start the node (``accepted``, ``place``: see :mod:`bfr_tools.loop_node`).
+
+        Parameters
+        ----------
+        accepted : iterable of str
+            Parameter names accepted without use (those of other nodes in this process).
+        place : bool
+            Apply ``process.*`` (priority, CPU) now; False when the process's host does.
+        """
         super().__init__("controller")
         self.defaults = node_defaults()
-        declare_parameter_tree(self, self.defaults)
+        declare_parameter_tree(self, self.defaults, accepted)
         p = read_parameter_tree(self, self.defaults)
+        self.process = p["process"]
         model = params_from_dict({k: p[k] for k in _RIG_GROUPS})
         config = ControllerConfig.from_dict({k: p[k] for k in _CTRL_GROUPS})
         t0 = time.perf_counter()
         self.ctrl = OrbitalController(model, config)
         self._warm_up()
         # after the warm-up: a cold compile does not hold a CPU at real-time priority
-        _, self.scheduling = realtime_scheduling(
-            int(p["process"]["realtime_priority"]), self.get_logger())
+        self.scheduling = (place_process(self.process, self.get_logger()) if place
+                           else "process placed by its host")
         setup = time.perf_counter() - t0
         loop, safety = p["loop"], p["safety"]
         self.trigger = str(loop["trigger"]).lower()

@@ -76,9 +76,12 @@ __all__ = [
     "ns_to_stamp",
     "parse_joint_state",
     "parse_published",
+    "pin_threads",
+    "place_process",
     "read_parameter_tree",
     "realtime_scheduling",
     "run_node",
+    "run_nodes",
     "stamp_to_ns",
     "unflatten",
 ]
@@ -496,6 +499,87 @@ def realtime_scheduling(priority: int, logger: Any = None,
                   f"process.realtime_priority)")
 
 
+def _check_cpu(cpu: Any) -> None:
+    """Raise ValueError unless ``cpu`` is -1 or a CPU this process may use."""
+    if isinstance(cpu, bool) or not isinstance(cpu, int) or cpu < -1:
+        raise ValueError(f"process.cpu: must be -1 (any CPU) or a CPU index, got {cpu!r}")
+    allowed = sorted(os.sched_getaffinity(0))
+    if cpu != -1 and cpu not in allowed:
+        raise ValueError(f"process.cpu: CPU {cpu} is not available to this process (it may "
+                         f"use {', '.join(map(str, allowed))}; -1: any)")
+
+
+def pin_threads(cpu: int) -> str:
+    """Run every thread of this process on CPU ``cpu`` only (-1: leave them where they are).
+
+    A control loop pinned to one CPU keeps its caches and is never moved between CPUs; with
+    its threads under ``SCHED_FIFO`` (:func:`realtime_scheduling`) the kernel otherwise
+    pushes a preempted real-time thread to the other CPU at once: the camera node's main
+    thread migrated ~700 times a second here, and the camera and controller took 0.59-0.69
+    cores per simulated second unpinned against 0.46-0.58 pinned (composed in one process:
+    0.52-0.59 against 0.37-0.44; docs/notes/issue-17.md, sixth session). ros2_control's
+    controller manager offers the same (``cpu_affinity``). Needs no privilege. Threads
+    started later inherit the affinity of the thread that starts them.
+
+    Parameters
+    ----------
+    cpu : int
+        Index of the CPU (as in ``/proc/cpuinfo``), one of those this process may use; -1
+        for no pinning.
+
+    Returns
+    -------
+    str
+        For the node's start-up log: the CPU and the number of threads pinned, or "any CPU".
+
+    Raises
+    ------
+    ValueError
+        If ``cpu`` is neither -1 nor a CPU this process may use (the message lists those).
+    """
+    _check_cpu(cpu)
+    if cpu == -1:
+        return "any CPU (process.cpu -1)"
+    pinned = 0
+    for tid in sorted(int(t) for t in os.listdir("/proc/self/task")):
+        try:
+            os.sched_setaffinity(tid, {cpu})
+            pinned += 1
+        except ProcessLookupError:  # the thread ended meanwhile
+            continue
+    return f"CPU {cpu} only ({pinned} threads; process.cpu)"
+
+
+def place_process(process: Mapping[str, Any], logger: Any = None, not_now: str = "") -> str:
+    """Apply a node's ``process.*`` parameters: real-time priority, then the CPU.
+
+    Parameters
+    ----------
+    process : mapping
+        The node's ``process`` group: ``realtime_priority`` (:func:`realtime_scheduling`)
+        and ``cpu`` (:func:`pin_threads`).
+    logger : rclpy logger, optional
+        Warned once if the priority is refused.
+    not_now : str
+        If given, the normal scheduler is kept for this reason (:func:`realtime_scheduling`);
+        the CPU is still applied.
+
+    Returns
+    -------
+    str
+        One phrase for the node's start-up log.
+
+    Raises
+    ------
+    ValueError
+        If a value is out of range (the message names the parameter).
+    """
+    cpu = process.get("cpu", -1)
+    _check_cpu(cpu)  # before any change
+    _, scheduling = realtime_scheduling(int(process["realtime_priority"]), logger, not_now)
+    return f"{scheduling}; {pin_threads(cpu)}"
+
+
 def freeze_heap() -> None:
     """Collect once, then exempt every object alive now from Python's cyclic collector.
 
@@ -577,6 +661,37 @@ def run_node(node_factory: Callable[[], Any], argv: list[str] | None = None,
     int
         Exit status.
     """
+    return run_nodes([node_factory], argv, poll)
+
+
+def run_nodes(node_factories: Iterable[Callable[[], Any]], argv: list[str] | None = None,
+              poll: float = 0.1, after_start: Callable[[list[Any]], None] | None = None) -> int:
+    """:func:`run_node` for one node or several composed in one process (one executor).
+
+    Nodes composed in one process share one DDS participant, one receive thread and one
+    executor thread: a message between them does not cross processes, and an encoder sample
+    both take is received once (docs/notes/issue-17.md, sixth session). Every ``-p``
+    override of the command line reaches every node of the process (rcl's rule); a parameter
+    file's ``<node name>:`` section reaches that node only.
+
+    Parameters
+    ----------
+    node_factories : iterable of callable
+        Create the nodes in this order; if one refuses to start, those made are destroyed.
+        Only a process of one node may use a node's own ``run(stop)`` loop.
+    argv : list of str, optional
+        Command line (``sys.argv`` when omitted), ROS arguments included.
+    poll : float
+        Longest time between checks of the stop flag [s].
+    after_start : callable, optional
+        Called with the nodes once all exist, before the executor spins (e.g. to place the
+        process's threads); may raise ValueError/OSError/RuntimeError to refuse to start.
+
+    Returns
+    -------
+    int
+        Exit status.
+    """
     args = list(sys.argv if argv is None else argv)
     try:
         stop = init_ros(args)
@@ -584,26 +699,33 @@ def run_node(node_factory: Callable[[], Any], argv: list[str] | None = None,
         print(f"[FATAL] cannot start: {exc}", file=sys.stderr, flush=True)
         return 2
     status = 0
-    node = None
+    nodes: list[Any] = []
     try:
         try:
-            node = node_factory()
+            for factory in node_factories:
+                nodes.append(factory())
+            if after_start is not None:
+                after_start(nodes)
         except (ValueError, OSError, RuntimeError) as exc:
             print(f"[FATAL] cannot start: {exc}", file=sys.stderr, flush=True)
+            for node in reversed(nodes):
+                node.destroy_node()
+            nodes = []
             return 2
         executor = make_executor()
-        executor.add_node(node)
-        node.executor_ref = executor
+        for node in nodes:
+            executor.add_node(node)
+            node.executor_ref = executor
         freeze_heap()
-        if hasattr(node, "run"):
-            status = int(node.run(stop) or 0)
+        if len(nodes) == 1 and hasattr(nodes[0], "run"):
+            status = int(nodes[0].run(stop) or 0)
         else:
             while not stop and rclpy.ok():
                 executor.spin_once(timeout_sec=poll)
     except KeyboardInterrupt:  # pragma: no cover - a second Ctrl-C
         pass
     finally:
-        if node is not None:
+        for node in reversed(nodes):
             if stop:
                 node.get_logger().info(f"{stop.signal_name}: shutting down")
             try:

@@ -40,8 +40,8 @@ from bfr_ros.node_common import (
     declare_parameter_tree,
     format_published,
     load_yaml_parameters,
+    place_process,
     read_parameter_tree,
-    realtime_scheduling,
     run_node,
 )
 from rclpy.clock import Clock, ClockType
@@ -85,8 +85,7 @@ class RecorderNode(Node):
         self.defaults = node_defaults()
         declare_parameter_tree(self, self.defaults)
         tree = read_parameter_tree(self, self.defaults)
-        _, self.scheduling = realtime_scheduling(
-            int(tree["process"]["realtime_priority"]), self.get_logger())
+        self.scheduling = place_process(tree["process"], self.get_logger())
         p = tree["recorder"]
         path = str(p["path"]) or datetime.now().strftime("bfr_%Y%m%d_%H%M%S")
         self.depth = int(p["depth"])

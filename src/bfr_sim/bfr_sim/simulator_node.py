@@ -81,8 +81,8 @@ from bfr_ros.node_common import (
     format_published,
     load_yaml_parameters,
     ns_to_stamp,
+    place_process,
     read_parameter_tree,
-    realtime_scheduling,
     run_node,
     stamp_to_ns,
 )
@@ -299,8 +299,8 @@ class SimulatorNode(Node):
         one_of("sim.mode", self.mode, ("realtime", "lockstep"))
         # real-time priority only where there is a deadline: lock-step runs as fast as its
         # peers answer and would hold a CPU against every normal process
-        _, self.scheduling = realtime_scheduling(
-            int(p["process"]["realtime_priority"]), self.get_logger(),
+        self.scheduling = place_process(
+            p["process"], self.get_logger(),
             not_now="" if self.mode == "realtime" else "lock-step mode has no deadline")
         self.rtf = float(s["real_time_factor"])
         positive("sim.real_time_factor", self.rtf)

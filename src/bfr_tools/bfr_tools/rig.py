@@ -4,7 +4,9 @@ Starts the four nodes as separate processes exactly as ``ros2 run`` would (the e
 ``<prefix>/lib/<pkg>/<exe>`` found through the ament index, ``--ros-args`` for parameters):
 
 1. ``bfr_sim recorder_node`` (unless ``--no-record``): the bag;
-2. ``bfr_camera camera_node`` and ``bfr_control controller_node``;
+2. ``bfr_camera camera_node`` and ``bfr_control controller_node``; with ``--realtime`` both
+   composed in one process, ``bfr_tools loop_node``, pinned to one CPU (``--loop``,
+   ``--loop-cpu``: :func:`loop_specs`);
 3. ``bfr_sim simulator_node``, which waits until the others subscribe, starts the ball on the
    controller's periodic orbit (``--phase``, ``--d-theta``), runs for ``--duration``
    simulated seconds and exits.
@@ -37,13 +39,14 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
+import yaml
 from bfr_control.constraint import VirtualConstraint
 from bfr_control.controller import load_controller_config
 from bfr_control.orbit import PeriodicOrbit
@@ -116,11 +119,15 @@ class NodeSpec:
     process: subprocess.Popen | None = None
     log_path: Path | None = None
     log: IO[bytes] | None = None
+    #: Name the process's node ``name`` (``-r __node:=``); False for a process of several
+    #: nodes (the remap would give them all one name).
+    rename: bool = True
 
     def command(self) -> list[str]:
         """Command line: the ament executable and its ``--ros-args``."""
         exe = executable_path(self.package, self.executable)
-        return [str(exe), "--ros-args", "-r", f"__node:={self.name}", *self.ros_args]
+        name = ["-r", f"__node:={self.name}"] if self.rename else []
+        return [str(exe), "--ros-args", *name, *self.ros_args]
 
     def start(self, log_dir: Path, env: dict[str, str], nice: int = 0) -> None:
         """Start the process with stdout and stderr into ``<log_dir>/<name>.log``.
@@ -176,6 +183,75 @@ class NodeSpec:
             self.log.close()
             self.log = None
         return p.poll()
+
+
+#: The composed loop: the camera and controller nodes in one process (bfr_tools/loop_node).
+LOOP_NODE = ("bfr_tools", "loop_node")
+
+
+def loop_cpu_default() -> int:
+    """The CPU a real-time loop is pinned to: the last this process may use (-1 if only one).
+
+    The other CPUs are left to the simulator (the plant), the recorder and the machine's
+    other work; the loop's CPU is shared only when they need more than those.
+    """
+    cpus = sorted(os.sched_getaffinity(0))
+    return cpus[-1] if len(cpus) > 1 else -1
+
+
+def _scoped_parameters(args: Sequence[str], node: str) -> tuple[dict[str, Any], list[str]]:
+    """Split ``--ros-args`` of one node into its ``-p`` values and the other arguments."""
+    values: dict[str, Any] = {}
+    rest: list[str] = []
+    it = iter(args)
+    for a in it:
+        if a in ("-p", "--param"):
+            item = next(it, "")
+            name, sep, value = item.partition(":=")
+            if not sep:
+                raise RigError(f"{node}: -p {item!r}: expected NAME:=VALUE")
+            values[name] = yaml.safe_load(value) if value else ""
+        else:
+            rest.append(a)
+    return values, rest
+
+
+def loop_specs(per: Mapping[str, Sequence[str]], *, composed: bool, cpu: int,
+               log_dir: Path) -> dict[str, NodeSpec]:
+    """The process(es) of the control loop: the camera and controller nodes.
+
+    Parameters
+    ----------
+    per : mapping
+        ``--ros-args`` of ``camera`` and ``controller`` as if each ran alone.
+    composed : bool
+        One process (``bfr_tools loop_node``, key ``loop``) instead of two (``camera``,
+        ``controller``). Composed, each node's ``-p`` values go into a parameter file with
+        a section per node (``<log_dir>/loop_params.yaml``), so that neither gets the
+        other's; the parameter files both were given are passed once.
+    cpu : int
+        CPU both nodes are pinned to (``process.cpu``), -1 for none.
+    log_dir : Path
+        Where the composed process's parameter file is written.
+    """
+    pin = ["-p", f"process.cpu:={cpu}"] if cpu != -1 else []
+    if not composed:
+        return {n: NodeSpec(n, *NODES[n], [*per[n], *pin]) for n in ("camera", "controller")}
+    sections: dict[str, Any] = {}
+    files: list[str] = []
+    for n in ("camera", "controller"):
+        values, rest = _scoped_parameters([*per[n], *pin], n)
+        sections[n] = {"ros__parameters": values}
+        pairs = list(zip(rest[::2], rest[1::2], strict=False))
+        if len(rest) % 2 or any(flag != "--params-file" for flag, _ in pairs):
+            raise RigError(f"{n}: only -p and --params-file can be given to the composed "
+                           f"loop, got {' '.join(rest)}")
+        files += [f for _, f in pairs if f not in files]
+    scoped = log_dir / "loop_params.yaml"
+    scoped.write_text(yaml.safe_dump(sections, sort_keys=False))
+    args = [a for f in files for a in ("--params-file", f)]
+    return {"loop": NodeSpec("loop", *LOOP_NODE, [*args, "--params-file", str(scoped)],
+                             rename=False)}
 
 
 def _describe_exit(code: int) -> str:
@@ -551,6 +627,13 @@ def _parser() -> argparse.ArgumentParser:
                         "its own with that autogroup niceness (default -10: above the "
                         "machine's other work, as a real-time control loop runs; needs the "
                         "permission to raise priorities, else normal priority with a note)")
+    p.add_argument("--loop", choices=("auto", "composed", "separate"), default="auto",
+                   help="the camera and controller nodes in one process (composed: "
+                        "bfr_tools loop_node) or two; auto: composed with --realtime, "
+                        "separate in lock-step (default: auto)")
+    p.add_argument("--loop-cpu", type=int, default=None, metavar="N",
+                   help="pin the camera and controller to CPU N (-1: no pinning; default: "
+                        "the last CPU with --realtime on a machine of two or more, else -1)")
     p.add_argument("--json", action="store_true", help="print the summary as JSON")
     return p
 
@@ -622,15 +705,19 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
         if not args.domain.isdigit():
             raise RigError(f"--domain {args.domain!r}: expected 'auto' or a number")
         env["ROS_DOMAIN_ID"] = args.domain
-    order = [n for n in ("recorder", "camera", "controller", "simulator")
-             if n != "recorder" or bag is not None]
-    nice = args.nice if args.mode == "realtime" else 0
+    realtime = args.mode == "realtime"
+    composed = args.loop == "composed" or (args.loop == "auto" and realtime)
+    cpu = args.loop_cpu if args.loop_cpu is not None else (
+        loop_cpu_default() if realtime else -1)
+    loop = loop_specs(per, composed=composed, cpu=cpu, log_dir=log_dir)
+    order = [n for n in ("recorder", *loop, "simulator") if n != "recorder" or bag is not None]
+    nice = args.nice if realtime else 0
     if nice < 0 and not may_raise_priority(nice):
         print(f"bfr rig: note: raising the nodes' priority (nice {nice}) is not permitted "
               f"here; they run at normal priority and a busy machine may slow the "
               f"simulation down", flush=True)
         nice = 0
-    nodes = {n: NodeSpec(n, *NODES[n], per[n]) for n in order}
+    nodes = {n: loop[n] if n in loop else NodeSpec(n, *NODES[n], per[n]) for n in order}
     wall_limit = args.wall_timeout or (
         120.0 + (args.duration * 10.0 if args.mode == "lockstep" else args.duration * 2.0))
     print(f"bfr rig: {args.mode}, {args.duration:g} s simulated, ROS_DOMAIN_ID "
@@ -671,7 +758,7 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
         interrupted = True
         print("bfr rig: interrupted; stopping the nodes", flush=True)
     finally:
-        for n in ("simulator", "controller", "camera", "recorder"):
+        for n in ("simulator", "loop", "controller", "camera", "recorder"):
             if n in nodes:
                 nodes[n].stop()
     wall = _wall_stats(nodes["simulator"].log_path)

@@ -12,6 +12,12 @@ ros2_control's ``/joint_states`` and ``/effort_controller/commands``. The record
 ``record:=``) gets the same remappings and hardware.yaml's topic list, so it records the
 topics the hardware has (no ``sim_truth``) under the names the remappings give them.
 
+The camera and controller nodes run composed in one process (``bfr_tools loop_node``)
+pinned to one CPU, the last of the machine (``loop:=separate`` for two processes,
+``loop_cpu:=N`` or ``-1``), as ``bfr rig --realtime`` runs them: on a 2-core machine this
+took the loop from 0.6-0.7 to 0.35-0.5 cores (docs/notes/issue-17.md); in lock-step they run
+as two processes, unpinned.
+
 The default mode, ``realtime``, is the real rig's: the simulator paces itself by the wall
 clock, the controller predicts through the measured delay from a sample to its torque, and
 the ball keeps rolling on a busy 2-core machine (docs/notes/issue-17.md); ``lockstep``
@@ -28,7 +34,7 @@ from __future__ import annotations
 from typing import Any
 
 from bfr_model.param_file import config_path
-from bfr_tools.rig import orbit_start
+from bfr_tools.rig import LOOP_NODE, loop_cpu_default, orbit_start
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
@@ -37,6 +43,19 @@ from launch_ros.actions import Node
 
 def _config(package: str, name: str) -> str:
     return str(config_path(package, name))
+
+
+def _loop(camera: list[Any], controller: list[Any], both: dict[str, Any], composed: bool,
+          remaps: list[tuple[str, str]]) -> list[Any]:
+    """The camera and controller: one composed process, or two named nodes."""
+    if composed:  # each node reads only its own names of the files (loop_node's docstring)
+        files = [f for f in [*camera, *controller] if isinstance(f, str)]
+        return [Node(package=LOOP_NODE[0], executable=LOOP_NODE[1], output="screen",
+                     parameters=[*dict.fromkeys(files), both], remappings=remaps)]
+    return [Node(package="bfr_camera", executable="camera_node", name="camera",
+                 output="screen", parameters=[*camera, both], remappings=remaps),
+            Node(package="bfr_control", executable="controller_node", name="controller",
+                 output="screen", parameters=[*controller, both])]
 
 
 def _nodes(context: Any) -> list[Any]:
@@ -53,15 +72,15 @@ def _nodes(context: Any) -> list[Any]:
     nodes = []
     remaps: list[tuple[str, str]] = []
     hw = _config("bfr_control", "hardware.yaml")
+    lockstep = not hardware and arg("mode") == "lockstep"
+    composed = arg("loop") == "composed" if arg("loop") != "auto" else not lockstep
+    cpu = int(arg("loop_cpu")) if arg("loop_cpu") != "auto" else (
+        -1 if lockstep else loop_cpu_default())
     if hardware:
         remaps = [("camera/image_raw", arg("image_topic")),
                   ("camera/camera_info", arg("camera_info_topic"))]
-        nodes.append(Node(
-            package="bfr_camera", executable="camera_node", name="camera", output="screen",
-            parameters=[camera, rig, camera_node, hw], remappings=remaps))
-        nodes.append(Node(
-            package="bfr_control", executable="controller_node", name="controller",
-            output="screen", parameters=[rig, controller, controller_node, hw]))
+        nodes += _loop([camera, rig, camera_node, hw], [rig, controller, controller_node, hw],
+                       {"process.cpu": cpu}, composed, remaps)
         sim_time = {"use_sim_time": False}
     else:
         start = orbit_start(float(arg("phase")), float(arg("d_theta")))
@@ -76,14 +95,10 @@ def _nodes(context: Any) -> list[Any]:
                          "start.wait_observation_subscribers": 1 + rec,
                          "start.settle": 2.0 if rec else 0.5, **start}]))
         sim_time = {"use_sim_time": True}
-        if arg("mode") == "lockstep":  # no wall-clock deadline: the normal scheduler
+        if lockstep:  # no wall-clock deadline: the normal scheduler
             sim_time["process.realtime_priority"] = 0
-        nodes.append(Node(
-            package="bfr_camera", executable="camera_node", name="camera", output="screen",
-            parameters=[camera, rig, camera_node, sim_time]))
-        nodes.append(Node(
-            package="bfr_control", executable="controller_node", name="controller",
-            output="screen", parameters=[rig, controller, controller_node, sim_time]))
+        nodes += _loop([camera, rig, camera_node], [rig, controller, controller_node],
+                       {**sim_time, "process.cpu": cpu}, composed, [])
     if record:
         nodes.append(Node(
             package="bfr_sim", executable="recorder_node", name="recorder", output="screen",
@@ -106,6 +121,12 @@ def generate_launch_description() -> LaunchDescription:
                               description="contact angle on the orbit at t = 0 [rad]"),
         DeclareLaunchArgument("d_theta", default_value="0.05",
                               description="frame angle offset from the orbit at t = 0 [rad]"),
+        DeclareLaunchArgument("loop", default_value="auto",
+                              description="camera and controller: composed (one process), "
+                                          "separate, or auto (composed unless lockstep)"),
+        DeclareLaunchArgument("loop_cpu", default_value="auto",
+                              description="CPU the camera and controller are pinned to (-1: "
+                                          "none; auto: the last CPU unless lockstep)"),
         DeclareLaunchArgument("camera_params", default_value="",
                               description="camera.yaml with the calibration and pose "
                                           "('' = the shipped one)"),

@@ -281,6 +281,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="measured time of the DDS closed loop [s]")
     p.add_argument("--loop-windows", type=int, default=3, metavar="N",
                    help="the loop's measured time is split into N windows (its repeats)")
+    p.add_argument("--loop-separate", action="store_true",
+                   help="the loop's camera and controller as two processes (bfr rig --loop "
+                        "separate) instead of composed in one (bfr rig --realtime's default)")
     p.add_argument("--diagnose-repeats", type=int, default=1, metavar="N",
                    help="runs of bfr diagnose (each about a minute)")
     p.add_argument("--diagnose-duration", type=float, default=60.0, metavar="S",
@@ -317,7 +320,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         repeats=1 if args.quick and args.repeats == 5 else args.repeats,
         quick=args.quick, frames=args.frames,
         loop_duration=min(args.loop_duration, 6.0) if args.quick else args.loop_duration,
-        loop_windows=args.loop_windows, diagnose_repeats=args.diagnose_repeats,
+        loop_windows=args.loop_windows, loop_separate=args.loop_separate,
+        diagnose_repeats=args.diagnose_repeats,
         diagnose_duration=args.diagnose_duration, blindtest_cases=args.blindtest_cases,
         keep=args.keep, profile=args.profile)
     say = Progress(quiet=args.quiet)

@@ -191,6 +191,9 @@ class BenchOptions:
         Measured time of the DDS closed loop [s].
     loop_windows : int
         The loop's measured time is split into this many windows (its "repeats").
+    loop_separate : bool
+        The loop's camera and controller as two processes (``bfr rig --loop separate``)
+        instead of composed in one (``bfr rig --realtime``'s default).
     diagnose_repeats : int
         Runs of ``bfr diagnose`` (each about a minute or more).
     diagnose_duration : float
@@ -209,6 +212,7 @@ class BenchOptions:
     frames: int = 100
     loop_duration: float = 30.0
     loop_windows: int = 3
+    loop_separate: bool = False
     diagnose_repeats: int = 1
     diagnose_duration: float = 60.0
     blindtest_cases: int = 2

@@ -10,8 +10,11 @@ with the same lock files as the tests' helpers, ``ROS_AUTOMATIC_DISCOVERY_RANGE=
   640x480 mono8, joint_states 1 kHz (``joint_states.rate:=1000``, the rig's encoder rate),
   sim_truth 200 Hz), the ball started on the controller's orbit
   (:func:`bfr_tools.rig.orbit_start`);
-- ``camera_node`` and ``controller_node`` with ``use_sim_time:=true``, the controller
-  triggered by each ball observation (``loop.trigger:=observation``: the camera's rate).
+- the camera and controller nodes with ``use_sim_time:=true``, the controller triggered by
+  each ball observation (``loop.trigger:=observation``: the camera's rate), as ``bfr rig
+  --realtime`` starts them (:func:`bfr_tools.rig.loop_specs`): composed in one process
+  (``bfr_tools loop_node``) pinned to one CPU (:func:`bfr_tools.rig.loop_cpu_default`),
+  or with ``BenchOptions.loop_separate`` as two processes pinned to that CPU.
 
 The bench process subscribes to ``sim_truth``, ``camera/camera_info``, ``ball_observation``,
 ``controller_state`` and ``effort_controller/commands`` (not to the images) and keeps, for
@@ -80,7 +83,15 @@ from bfr_tools.bench.common import (
     Progress,
     not_measured,
 )
-from bfr_tools.rig import NODES, NodeSpec, may_raise_priority, orbit_start
+from bfr_tools.rig import (
+    LOOP_NODE,
+    NODES,
+    NodeSpec,
+    loop_cpu_default,
+    loop_specs,
+    may_raise_priority,
+    orbit_start,
+)
 from bfr_tools.run import executable_path
 
 __all__ = ["SPECS", "run"]
@@ -253,7 +264,7 @@ def _window_figures(d: dict[str, list[tuple]], w0: int, w1: int) -> dict[str, An
 def run(opts: BenchOptions, say: Progress) -> list[Figure]:
     """Measure the ``loop`` section (module docstring)."""
     try:
-        for pkg, exe in (NODES["simulator"], NODES["camera"], NODES["controller"]):
+        for pkg, exe in (NODES["simulator"], NODES["camera"], NODES["controller"], LOOP_NODE):
             executable_path(pkg, exe)
     except Exception as exc:  # noqa: BLE001
         return [not_measured(s, f"node suite missing ({type(exc).__name__}: {exc})")
@@ -283,24 +294,27 @@ def run(opts: BenchOptions, say: Progress) -> list[Figure]:
                         str(prof_dir / f"{self.name}.prof"), *super().command()]
 
         spec_cls = _Profiled
-    nodes = {
-        "camera": spec_cls("camera", *NODES["camera"], ["-p", "use_sim_time:=true"]),
-        "controller": spec_cls("controller", *NODES["controller"],
-                               ["-p", "use_sim_time:=true", "-p", "loop.trigger:=observation"]),
-        "simulator": spec_cls("simulator", *NODES["simulator"], sim_args),
-    }
+    loop = loop_specs({"camera": ["-p", "use_sim_time:=true"],
+                       "controller": ["-p", "use_sim_time:=true",
+                                      "-p", "loop.trigger:=observation"]},
+                      composed=not opts.loop_separate, cpu=loop_cpu_default(), log_dir=log_dir)
+    nodes = {n: spec_cls(n, s.package, s.executable, s.ros_args, rename=s.rename)
+             for n, s in loop.items()}
+    nodes["simulator"] = spec_cls("simulator", *NODES["simulator"], sim_args)
+    loop_names = list(loop)
     rec = None
     try:
         nice = _NICE if may_raise_priority(_NICE) else 0
-        say(f"loop: ROS_DOMAIN_ID {domain}; starting the camera and controller nodes (nice "
-            f"{nice}{', sessions of their own' if nice else ''})")
+        say(f"loop: ROS_DOMAIN_ID {domain}; starting the camera and controller nodes "
+            f"({'composed' if 'loop' in loop else 'two processes'}, CPU "
+            f"{loop_cpu_default()}, nice {nice}{', sessions of their own' if nice else ''})")
         rec = _Recorder()
-        for name in ("camera", "controller"):
+        for name in loop_names:
             nodes[name].start(log_dir, env, nice)
         return _measure(opts, say, rec, nodes, nice)
     finally:
-        for name in ("simulator", "controller", "camera"):
-            nodes[name].stop()
+        for spec in reversed(list(nodes.values())):  # the simulator first
+            spec.stop()
         if rec is not None:
             rec.close()
         if not opts.keep:
@@ -325,8 +339,8 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
         return [not_measured(s, why) for s in SPECS]
     rec.spin_for(1.0)
     say("loop: camera and controller up; starting the simulator (real time)")
-    nodes["simulator"].start(nodes["camera"].log_path.parent, dict(os.environ,
-                                                                  PYTHONUNBUFFERED="1"), nice)
+    log_dir = next(iter(nodes.values())).log_path.parent
+    nodes["simulator"].start(log_dir, dict(os.environ, PYTHONUNBUFFERED="1"), nice)
     flowing = rec.spin_until(lambda: (min(rec.matched().values()) > 0 and len(rec.modes) > 10)
                              or bool(_dead(nodes)), 90.0)
     if not flowing or _dead(nodes):
@@ -352,11 +366,12 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
     rec.spin_for(0.5)  # late observations / commands of frames inside the window
     rec.recording = False
     died = _dead(nodes)
-    for name in ("simulator", "controller", "camera"):
-        nodes[name].stop()
+    for spec in reversed(list(nodes.values())):  # the simulator first
+        spec.stop()
     sim_log = nodes["simulator"].log_path.read_text(errors="replace")
     behind = len(re.findall(r"behind real time", sim_log))
-    ctrl_log = nodes["controller"].log_path.read_text(errors="replace")
+    composed = "loop" in nodes
+    ctrl_log = nodes["loop" if composed else "controller"].log_path.read_text(errors="replace")
     events = [(m, t) for wall, m, t in re.findall(
         r"\[(\d+\.\d+)\] \[controller\]: (ROLLING|BALL_LOST|FAULT)(?: at t = ([0-9.]+) s)?",
         ctrl_log) if float(wall) * _NS < w1]  # up to the end of the measurement
@@ -366,9 +381,12 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
     edges = [m[0] for m in cpu_marks]
     wins = [_window_figures(d, int(a), int(b)) for a, b in itertools.pairwise(edges)]
     for w, (c0, c1) in zip(wins, itertools.pairwise([m[1] for m in cpu_marks]), strict=True):
-        for n in ("camera", "controller", "simulator"):
+        for n in nodes:
             w[f"cpu_{n}"] = (c1[n] - c0[n]) / w["sim_span"]
-        w["cpu_camera_controller"] = w["cpu_camera"] + w["cpu_controller"]
+        if composed:  # one process: the two nodes' shares are not told apart
+            w["cpu_camera_controller"] = w.pop("cpu_loop")
+        else:
+            w["cpu_camera_controller"] = w["cpu_camera"] + w["cpu_controller"]
     allw = _window_figures(d, int(w0), int(w1))
     span = (w1 - w0) / _NS
     cpu = {n: 100.0 * (cpu1[n] - cpu0[n]) / span for n in pids}
@@ -409,17 +427,25 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
                         "control all along (the other figures hold either way); controller "
                         f"mode changes since the start (simulated time): {history}"),
         "cpu_camera_controller": (
-            "user + system CPU seconds of the camera and controller processes (/proc) per "
-            "simulated second of the window (sim_truth stamps); joint_states 1 kHz, camera "
+            "user + system CPU seconds of the "
+            + ("camera and controller composed in one process (bfr_tools loop_node)"
+               if composed else "camera and controller processes")
+            + f" (/proc) per simulated second of the window (sim_truth stamps), pinned to CPU "
+            f"{loop_cpu_default()} as bfr rig --realtime runs them; joint_states 1 kHz, camera "
             f"200 Hz 640x480 mono8; load {load0:.2f} at start; the nodes at their default "
-            f"process.realtime_priority (SCHED_FIFO where permitted: a thread woken at once "
-            f"for each message instead of batched with the next; its price on this machine: "
-            f"docs/notes/issue-17.md)"),
+            f"process.realtime_priority (SCHED_FIFO where permitted; unpinned, separate and "
+            f"normal-scheduled figures: docs/notes/issue-17.md)"),
+        "cpu_camera": ("not told apart from the controller's: composed in one process "
+                       "(bfr bench --loop-separate measures each)"),
+        "cpu_controller": "not told apart from the camera's: composed in one process",
         "real_time_factor": "simulated seconds (sim_truth stamps) per wall-clock second",
     }
     figs = []
     for spec in SPECS:
         key = spec.key.split(".", 1)[1]
+        if composed and key in ("cpu_camera", "cpu_controller"):
+            figs.append(not_measured(spec, notes[key]))
+            continue
         figs.append(Figure(spec, [w[key] for w in wins], note=notes.get(key, ""),
                            extra=extra if key == "latency_median_ms" else {}))
     return figs
