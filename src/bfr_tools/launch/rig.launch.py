@@ -45,11 +45,22 @@ def _config(package: str, name: str) -> str:
     return str(config_path(package, name))
 
 
+#: The nodes' own parameter files (each node loads its files as its defaults).
+_SHIPPED = (("bfr_model", "rig.yaml"), ("bfr_camera", "camera.yaml"),
+            ("bfr_camera", "camera_node.yaml"), ("bfr_control", "controller.yaml"),
+            ("bfr_control", "controller_node.yaml"))
+
+
 def _loop(camera: list[Any], controller: list[Any], both: dict[str, Any], composed: bool,
           remaps: list[tuple[str, str]]) -> list[Any]:
     """The camera and controller: one composed process, or two named nodes."""
-    if composed:  # each node reads only its own names of the files (loop_node's docstring)
-        files = [f for f in [*camera, *controller] if isinstance(f, str)]
+    if composed:  # each node accepts the other's names (loop_node's docstring)
+        # only the files that are not a node's shipped defaults (the nodes load those
+        # themselves): rcl drops a later override of a parameter that two earlier files
+        # both set in a nested group (camera_node.yaml's and controller_node.yaml's
+        # process.*: process.cpu stayed -1; docs/notes/issue-17.md)
+        shipped = {_config(*f) for f in _SHIPPED}
+        files = [f for f in [*camera, *controller] if isinstance(f, str) and f not in shipped]
         return [Node(package=LOOP_NODE[0], executable=LOOP_NODE[1], output="screen",
                      parameters=[*dict.fromkeys(files), both], remappings=remaps)]
     return [Node(package="bfr_camera", executable="camera_node", name="camera",
