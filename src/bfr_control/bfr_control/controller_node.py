@@ -141,14 +141,17 @@ class ControllerNode(Node):
     """ROS 2 wrapper of :class:`OrbitalController` (module docstring)."""
 
     def __init__(self, accepted: Iterable[str] = (), place: bool = True) -> None:
-        """Start the node (``accepted``, ``place``: see :mod:`bfr_tools.loop_node`).
+        """Start the node.
 
         Parameters
         ----------
         accepted : iterable of str
-            Parameter names accepted without use (those of other nodes in this process).
+            Names of parameters that other nodes of this process use (a ``-p`` reaches every
+            node of a process); accepted here without being declared.
         place : bool
-            Apply ``process.*`` (priority, CPU) now; False when the process's host does.
+            False when a process hosting several nodes applies ``process.realtime_priority``
+            and ``process.cpu`` itself (:mod:`bfr_tools.loop_node`), after every node's
+            warm-up; True: this node applies its own.
         """
         super().__init__("controller")
         self.defaults = node_defaults()
