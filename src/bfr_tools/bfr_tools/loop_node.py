@@ -15,8 +15,8 @@ encoder; docs/notes/issue-17.md, sixth session):
   the other CPU ~700 times a second.
 
 Camera + controller CPU per simulated second: 0.59-0.69 cores as two processes, 0.46-0.58
-as two processes pinned to one CPU, 0.34-0.49 composed and pinned; the state-to-torque
-latency median 2.2-2.8 ms -> 1.5-2.3 ms.
+as two processes pinned to one CPU, 0.34-0.50 (median 0.44) composed and pinned; the
+state-to-torque latency median 2.2-2.8 ms -> 1.5-2.3 ms.
 
 Parameters
 ----------
