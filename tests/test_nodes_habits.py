@@ -152,8 +152,12 @@ def test_composed_loop_runs_both_nodes_in_one_pinned_process(
     scoped.write_text("camera:\n  ros__parameters:\n    process.realtime_priority: 22\n"
                       "controller:\n  ros__parameters:\n    process.realtime_priority: 21\n"
                       f"    process.cpu: {cpu}\n")
+    # each -p reaches both nodes: the controller accepts the camera's input.frame_timeout
+    # and the camera the controller's loop.trigger
     loop = node_processes.start("bfr_tools", "loop_node",
-                                ros_args=["--params-file", str(scoped)])
+                                ros_args=["--params-file", str(scoped),
+                                          "-p", "loop.trigger:=observation",
+                                          "-p", "input.frame_timeout:=2.0"])
     assert ros_harness.spin_until(lambda: loop.output().count("composed with camera, "
                                                               "controller") == 2, timeout=60)
     names = set(ros_harness.node.get_node_names())

@@ -293,7 +293,8 @@ def _pin_child(cpu: int) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
-@pytest.mark.skipif(not hasattr(os, "sched_setaffinity"), reason="no CPU affinity API")
+@pytest.mark.skipif(not hasattr(os, "sched_setaffinity") or len(os.sched_getaffinity(0)) < 2,
+                    reason="no CPU affinity API, or one CPU only (nothing to tell apart)")
 def test_pin_threads_pins_every_thread_and_later_ones() -> None:
     cpu = max(os.sched_getaffinity(0))
     got = _pin_child(cpu)
@@ -315,10 +316,11 @@ def test_pin_threads_minus_one_and_unknown_cpus() -> None:
 
 
 @pytest.mark.parametrize("bad", [-2, 1.5, True, "1"])
-def test_place_process_rejects_a_bad_cpu_before_any_change(bad: object) -> None:
-    # a priority that would fail if it were applied: the CPU is checked first
+def test_place_process_rejects_bad_values(bad: object) -> None:
     with pytest.raises(ValueError, match=r"process\.cpu: must be -1 \(any CPU\) or a CPU"):
-        place_process({"realtime_priority": 120, "cpu": bad})
+        place_process({"realtime_priority": 0, "cpu": bad})
+    with pytest.raises(ValueError, match=r"process\.realtime_priority: must be an integer"):
+        place_process({"realtime_priority": 1.5, "cpu": -1})
 
 
 def test_composed_process_settings() -> None:
@@ -335,33 +337,50 @@ def test_composed_process_settings() -> None:
     assert process_settings([node("camera", 40, 1), node("controller", 45, 1)])["cpu"] == 1
     with pytest.raises(ValueError, match=r"name different CPUs \(camera 0, controller 1\)"):
         process_settings([node("camera", 40, 0), node("controller", 45, 1)])
+    # each node's values checked as it would check them alone (not hidden by the maximum)
+    with pytest.raises(ValueError, match=r"process\.realtime_priority: must be an integer"):
+        process_settings([node("camera", -5, -1), node("controller", 45, -1)])
 
 
-def test_loop_specs_composed_scopes_each_nodes_values(tmp_path: Path) -> None:
-    from bfr_tools.rig import LOOP_NODE, loop_specs  # noqa: PLC0415
+def test_loop_specs_composed_scopes_each_nodes_values() -> None:
+    from bfr_tools.rig import LOOP_NODE, RigError, loop_specs  # noqa: PLC0415
 
     per = {"camera": ["-p", "use_sim_time:=true", "--params-file", "/x/rig.yaml",
-                      "--params-file", "/x/camera.yaml", "-p", "input.frame_timeout:=5.0"],
+                      "--params-file", "/x/camera.yaml", "-p", "input.frame_timeout:=1:30"],
            "controller": ["-p", "use_sim_time:=true", "--params-file", "/x/rig.yaml",
-                          "-p", "loop.trigger:=observation", "-p", "estimator.dt:=[1, 2.5]"]}
-    specs = loop_specs(per, composed=True, cpu=1, log_dir=tmp_path)
+                          "-p", "loop.trigger:=observation", "-p", "process.cpu:=0"]}
+    specs = loop_specs(per, composed=True, cpu=1)
     assert list(specs) == ["loop"]
     spec = specs["loop"]
     assert (spec.package, spec.executable) == LOOP_NODE and not spec.rename
-    assert "__node:=loop" not in " ".join(spec.command()[1:])
-    files = [spec.ros_args[i + 1] for i, a in enumerate(spec.ros_args) if a == "--params-file"]
-    assert files == ["/x/rig.yaml", "/x/camera.yaml", str(tmp_path / "loop_params.yaml")]
-    scoped = yaml.safe_load((tmp_path / "loop_params.yaml").read_text())
-    assert scoped == {
-        "camera": {"ros__parameters": {"use_sim_time": True, "input.frame_timeout": 5.0,
-                                       "process.cpu": 1}},
-        "controller": {"ros__parameters": {"use_sim_time": True, "loop.trigger": "observation",
-                                           "estimator.dt": [1, 2.5], "process.cpu": 1}}}
-    two = loop_specs(per, composed=False, cpu=-1, log_dir=tmp_path)
+    assert "__node:=" not in " ".join(spec.command())
+    # each file once, the camera's first; each value scoped to its node (rcl's
+    # -p node:name:=value), the values untouched (rcl parses them), the pin before the
+    # node's own values so that they may override it
+    assert spec.ros_args == [
+        "--params-file", "/x/rig.yaml", "--params-file", "/x/camera.yaml",
+        "-p", "camera:process.cpu:=1", "-p", "camera:use_sim_time:=true",
+        "-p", "camera:input.frame_timeout:=1:30",
+        "-p", "controller:process.cpu:=1", "-p", "controller:use_sim_time:=true",
+        "-p", "controller:loop.trigger:=observation", "-p", "controller:process.cpu:=0"]
+    two = loop_specs(per, composed=False, cpu=-1)
     assert list(two) == ["camera", "controller"]
     assert two["camera"].ros_args == per["camera"] and two["camera"].rename
-    assert "process.cpu:=0" in loop_specs(per, composed=False, cpu=0,
-                                         log_dir=tmp_path)["controller"].ros_args
+    assert loop_specs(per, composed=False, cpu=0)["camera"].ros_args[:2] == [
+        "-p", "process.cpu:=0"]
+    with pytest.raises(RigError, match="only -p NAME:=VALUE and --params-file"):
+        loop_specs({"camera": ["-r", "a:=b"], "controller": []}, composed=True, cpu=-1)
+
+
+def test_loop_layout() -> None:
+    from bfr_tools.rig import loop_cpu_default, loop_layout  # noqa: PLC0415
+
+    assert loop_layout("realtime") == (True, loop_cpu_default())
+    assert loop_layout("lockstep") == (False, -1)
+    assert loop_layout("lockstep", "composed", 0) == (True, 0)
+    assert loop_layout("realtime", "separate", -1) == (False, -1)
+    with pytest.raises(ValueError, match="loop: expected auto, composed or separate"):
+        loop_layout("realtime", "compossed")
 
 
 # -- rig: start on the orbit, the launch file ---------------------------------------------------

@@ -44,6 +44,7 @@ import math
 import time
 from collections import deque
 from collections.abc import Iterable
+from pathlib import Path
 from typing import Any
 
 import cv2
@@ -94,11 +95,17 @@ _NS = 1_000_000_000
 RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
 
 
+def default_files() -> list[Path]:
+    """The node's shipped parameter files, in order: camera.yaml, rig.yaml, camera_node.yaml."""
+    return [Path(default_camera_path()), Path(default_params_path()),
+            Path(config_path("bfr_camera", "camera_node.yaml"))]
+
+
 def node_defaults() -> dict[str, Any]:
     """Defaults: camera.yaml (camera.*, detector.*), rig.yaml, this node's file."""
-    d = dict(load_yaml_parameters(default_camera_path()))
-    d.update(load_yaml_parameters(default_params_path()))
-    d.update(load_yaml_parameters(config_path("bfr_camera", "camera_node.yaml")))
+    d: dict[str, Any] = {}
+    for path in default_files():
+        d.update(load_yaml_parameters(path))
     return d
 
 

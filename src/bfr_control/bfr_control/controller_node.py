@@ -59,6 +59,7 @@ import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Iterable
+from pathlib import Path
 from typing import Any
 
 from bfr_model.param_file import check, config_path, nonnegative, one_of
@@ -109,11 +110,17 @@ _RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "co
 _CTRL_GROUPS = ("constraint", "orbit", "riccati", "control", "estimator", "supervisor")
 
 
+def default_files() -> list[Path]:
+    """The node's shipped parameter files, in order: rig.yaml, controller.yaml, this node's."""
+    return [Path(default_params_path()), Path(default_config_path()),
+            Path(config_path("bfr_control", "controller_node.yaml"))]
+
+
 def node_defaults() -> dict[str, Any]:
     """Defaults: rig.yaml (the model), controller.yaml, controller_node.yaml."""
-    d = dict(load_yaml_parameters(default_params_path()))
-    d.update(load_yaml_parameters(default_config_path()))
-    d.update(load_yaml_parameters(config_path("bfr_control", "controller_node.yaml")))
+    d: dict[str, Any] = {}
+    for path in default_files():
+        d.update(load_yaml_parameters(path))
     return d
 
 

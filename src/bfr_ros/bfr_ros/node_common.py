@@ -63,6 +63,7 @@ __all__ = [
     "RawImage",
     "StopFlag",
     "Throttle",
+    "check_process",
     "declare_parameter_tree",
     "finite",
     "flatten",
@@ -469,9 +470,7 @@ def realtime_scheduling(priority: int, logger: Any = None,
     ValueError
         If ``priority`` is outside 0-98.
     """
-    if not (isinstance(priority, int) and 0 <= priority <= 98):
-        raise ValueError(f"process.realtime_priority: must be an integer 0-98 (0: the normal "
-                         f"scheduler), got {priority!r}")
+    _check_priority(priority)
     if priority == 0 or not_now:
         return False, f"scheduling: normal ({not_now or 'process.realtime_priority 0'})"
     if not hasattr(os, "sched_setscheduler"):
@@ -499,6 +498,13 @@ def realtime_scheduling(priority: int, logger: Any = None,
                   f"process.realtime_priority)")
 
 
+def _check_priority(priority: Any) -> None:
+    """Raise ValueError unless ``priority`` is an integer 0-98."""
+    if isinstance(priority, bool) or not isinstance(priority, int) or not 0 <= priority <= 98:
+        raise ValueError(f"process.realtime_priority: must be an integer 0-98 (0: the normal "
+                         f"scheduler), got {priority!r}")
+
+
 def _check_cpu(cpu: Any) -> None:
     """Raise ValueError unless ``cpu`` is -1 or a CPU this process may use."""
     if isinstance(cpu, bool) or not isinstance(cpu, int) or cpu < -1:
@@ -507,6 +513,12 @@ def _check_cpu(cpu: Any) -> None:
     if cpu != -1 and cpu not in allowed:
         raise ValueError(f"process.cpu: CPU {cpu} is not available to this process (it may "
                          f"use {', '.join(map(str, allowed))}; -1: any)")
+
+
+def check_process(process: Mapping[str, Any]) -> None:
+    """Raise ValueError unless ``process`` holds a valid ``realtime_priority`` and ``cpu``."""
+    _check_priority(process["realtime_priority"])
+    _check_cpu(process["cpu"])
 
 
 def pin_threads(cpu: int) -> str:
@@ -574,8 +586,8 @@ def place_process(process: Mapping[str, Any], logger: Any = None, not_now: str =
     ValueError
         If a value is out of range (the message names the parameter).
     """
-    cpu = process.get("cpu", -1)
-    _check_cpu(cpu)  # before any change
+    check_process(process)  # both values before any change
+    cpu = process["cpu"]
     _, scheduling = realtime_scheduling(int(process["realtime_priority"]), logger, not_now)
     return f"{scheduling}; {pin_threads(cpu)}"
 
@@ -725,13 +737,16 @@ def run_nodes(node_factories: Iterable[Callable[[], Any]], argv: list[str] | Non
     except KeyboardInterrupt:  # pragma: no cover - a second Ctrl-C
         pass
     finally:
-        for node in reversed(nodes):
+        for node in reversed(nodes):  # each node shut down even if another's shutdown fails
             if stop:
                 node.get_logger().info(f"{stop.signal_name}: shutting down")
             try:
                 if hasattr(node, "on_shutdown"):
                     node.on_shutdown()
                 flush_publishers(node)
+            except Exception as exc:  # noqa: BLE001 - the others must still shut down
+                node.get_logger().error(f"shutdown failed: {type(exc).__name__}: {exc}")
+                status = status or 1
             finally:
                 node.destroy_node()
         if rclpy.ok():

@@ -41,7 +41,7 @@ from bfr_camera.camera_node import CameraNode
 from bfr_camera.camera_node import node_defaults as camera_defaults
 from bfr_control.controller_node import ControllerNode
 from bfr_control.controller_node import node_defaults as controller_defaults
-from bfr_ros.node_common import flatten, place_process, run_nodes
+from bfr_ros.node_common import check_process, flatten, place_process, run_nodes
 
 __all__ = ["main", "process_settings"]
 
@@ -58,9 +58,11 @@ def process_settings(nodes: Iterable[Any]) -> dict[str, int]:
     Raises
     ------
     ValueError
-        If two nodes name different CPUs.
+        If a node's value is invalid, or two nodes name different CPUs.
     """
     nodes = list(nodes)
+    for n in nodes:  # each node's values as it would check them alone
+        check_process(n.process)
     cpus = {int(n.process["cpu"]) for n in nodes} - {-1}
     if len(cpus) > 1:
         named = ", ".join(f"{n.get_name()} {int(n.process['cpu'])}" for n in nodes)

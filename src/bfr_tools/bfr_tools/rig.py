@@ -46,7 +46,6 @@ from pathlib import Path
 from typing import IO, Any
 
 import numpy as np
-import yaml
 from bfr_control.constraint import VirtualConstraint
 from bfr_control.controller import load_controller_config
 from bfr_control.orbit import PeriodicOrbit
@@ -199,59 +198,72 @@ def loop_cpu_default() -> int:
     return cpus[-1] if len(cpus) > 1 else -1
 
 
-def _scoped_parameters(args: Sequence[str], node: str) -> tuple[dict[str, Any], list[str]]:
-    """Split ``--ros-args`` of one node into its ``-p`` values and the other arguments."""
-    values: dict[str, Any] = {}
-    rest: list[str] = []
-    it = iter(args)
-    for a in it:
-        if a in ("-p", "--param"):
-            item = next(it, "")
-            name, sep, value = item.partition(":=")
-            if not sep:
-                raise RigError(f"{node}: -p {item!r}: expected NAME:=VALUE")
-            values[name] = yaml.safe_load(value) if value else ""
-        else:
-            rest.append(a)
-    return values, rest
+def loop_layout(mode: str, loop: str = "auto", cpu: int | None = None) -> tuple[bool, int]:
+    """How the camera and controller run: (composed in one process, CPU they are pinned to).
+
+    ``loop`` ``auto``: composed in real-time mode (a deadline: docs/hardware.md,
+    "Scheduling"), two processes in lock-step (no deadline; a test there stops the controller
+    alone); ``composed`` or ``separate`` as said. ``cpu`` None: :func:`loop_cpu_default` in
+    real-time mode, -1 (no pinning) in lock-step. The one rule for ``bfr rig``, the launch
+    file and the bench.
+
+    Raises
+    ------
+    ValueError
+        If ``loop`` is not one of auto, composed, separate.
+    """
+    if loop not in ("auto", "composed", "separate"):
+        raise ValueError(f"loop: expected auto, composed or separate, got {loop!r}")
+    realtime = mode != "lockstep"
+    composed = loop == "composed" or (loop == "auto" and realtime)
+    if cpu is None:
+        cpu = loop_cpu_default() if realtime else -1
+    return composed, int(cpu)
 
 
-def loop_specs(per: Mapping[str, Sequence[str]], *, composed: bool, cpu: int,
-               log_dir: Path) -> dict[str, NodeSpec]:
+def loop_specs(per: Mapping[str, Sequence[str]], *, composed: bool,
+               cpu: int) -> dict[str, NodeSpec]:
     """The process(es) of the control loop: the camera and controller nodes.
 
     Parameters
     ----------
     per : mapping
-        ``--ros-args`` of ``camera`` and ``controller`` as if each ran alone.
+        ``--ros-args`` of ``camera`` and ``controller`` as if each ran alone (``-p`` and
+        ``--params-file`` only).
     composed : bool
         One process (``bfr_tools loop_node``, key ``loop``) instead of two (``camera``,
-        ``controller``). Composed, each node's ``-p`` values go into a parameter file with
-        a section per node (``<log_dir>/loop_params.yaml``), so that neither gets the
-        other's; the parameter files both were given are passed once.
+        ``controller``). Composed, each node's ``-p name:=value`` becomes
+        ``-p <node>:name:=value`` (rcl gives it to that node only); every parameter file
+        reaches both nodes (each accepts the other's names), each file once, the camera's
+        first.
     cpu : int
-        CPU both nodes are pinned to (``process.cpu``), -1 for none.
-    log_dir : Path
-        Where the composed process's parameter file is written.
+        CPU both nodes are pinned to (``process.cpu``, before the given values, which may
+        override it), -1 for none.
+
+    Raises
+    ------
+    RigError
+        If an argument is neither ``-p NAME:=VALUE`` nor ``--params-file FILE``.
     """
     pin = ["-p", f"process.cpu:={cpu}"] if cpu != -1 else []
     if not composed:
-        return {n: NodeSpec(n, *NODES[n], [*per[n], *pin]) for n in ("camera", "controller")}
-    sections: dict[str, Any] = {}
+        return {n: NodeSpec(n, *NODES[n], [*pin, *per[n]]) for n in ("camera", "controller")}
+    values: list[str] = []
     files: list[str] = []
     for n in ("camera", "controller"):
-        values, rest = _scoped_parameters([*per[n], *pin], n)
-        sections[n] = {"ros__parameters": values}
-        pairs = list(zip(rest[::2], rest[1::2], strict=False))
-        if len(rest) % 2 or any(flag != "--params-file" for flag, _ in pairs):
-            raise RigError(f"{n}: only -p and --params-file can be given to the composed "
-                           f"loop, got {' '.join(rest)}")
-        files += [f for _, f in pairs if f not in files]
-    scoped = log_dir / "loop_params.yaml"
-    scoped.write_text(yaml.safe_dump(sections, sort_keys=False))
-    args = [a for f in files for a in ("--params-file", f)]
-    return {"loop": NodeSpec("loop", *LOOP_NODE, [*args, "--params-file", str(scoped)],
-                             rename=False)}
+        args = [*pin, *per[n]]
+        for flag, item in zip(args[::2], args[1::2], strict=False):
+            if flag in ("-p", "--param") and ":=" in item:
+                values += ["-p", f"{n}:{item}"]
+            elif flag == "--params-file":
+                files += [] if item in files else [item]
+            else:
+                raise RigError(f"{n}: only -p NAME:=VALUE and --params-file FILE can be given "
+                               f"to the composed loop, got {flag} {item}")
+        if len(args) % 2:
+            raise RigError(f"{n}: {args[-1]} without its value")
+    args = [*(a for f in files for a in ("--params-file", f)), *values]
+    return {"loop": NodeSpec("loop", *LOOP_NODE, args, rename=False)}
 
 
 def _describe_exit(code: int) -> str:
@@ -705,13 +717,10 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
         if not args.domain.isdigit():
             raise RigError(f"--domain {args.domain!r}: expected 'auto' or a number")
         env["ROS_DOMAIN_ID"] = args.domain
-    realtime = args.mode == "realtime"
-    composed = args.loop == "composed" or (args.loop == "auto" and realtime)
-    cpu = args.loop_cpu if args.loop_cpu is not None else (
-        loop_cpu_default() if realtime else -1)
-    loop = loop_specs(per, composed=composed, cpu=cpu, log_dir=log_dir)
+    composed, cpu = loop_layout(args.mode, args.loop, args.loop_cpu)
+    loop = loop_specs(per, composed=composed, cpu=cpu)
     order = [n for n in ("recorder", *loop, "simulator") if n != "recorder" or bag is not None]
-    nice = args.nice if realtime else 0
+    nice = args.nice if args.mode == "realtime" else 0
     if nice < 0 and not may_raise_priority(nice):
         print(f"bfr rig: note: raising the nodes' priority (nice {nice}) is not permitted "
               f"here; they run at normal priority and a busy machine may slow the "

@@ -33,8 +33,10 @@ from __future__ import annotations
 
 from typing import Any
 
+from bfr_camera.camera_node import default_files as camera_files
+from bfr_control.controller_node import default_files as controller_files
 from bfr_model.param_file import config_path
-from bfr_tools.rig import LOOP_NODE, loop_cpu_default, orbit_start
+from bfr_tools.rig import LOOP_NODE, loop_layout, orbit_start
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
@@ -45,21 +47,16 @@ def _config(package: str, name: str) -> str:
     return str(config_path(package, name))
 
 
-#: The nodes' own parameter files (each node loads its files as its defaults).
-_SHIPPED = (("bfr_model", "rig.yaml"), ("bfr_camera", "camera.yaml"),
-            ("bfr_camera", "camera_node.yaml"), ("bfr_control", "controller.yaml"),
-            ("bfr_control", "controller_node.yaml"))
-
-
 def _loop(camera: list[Any], controller: list[Any], both: dict[str, Any], composed: bool,
           remaps: list[tuple[str, str]]) -> list[Any]:
     """The camera and controller: one composed process, or two named nodes."""
     if composed:  # each node accepts the other's names (loop_node's docstring)
         # only the files that are not a node's shipped defaults (the nodes load those
-        # themselves): rcl drops a later override of a parameter that two earlier files
-        # both set in a nested group (camera_node.yaml's and controller_node.yaml's
-        # process.*: process.cpu stayed -1; docs/notes/issue-17.md)
-        shipped = {_config(*f) for f in _SHIPPED}
+        # themselves): camera_node.yaml and controller_node.yaml are /** files, so in one
+        # process each would set the other node's values (its process.realtime_priority),
+        # and rcl drops a later override of a parameter that two earlier files both set in
+        # a nested group (process.cpu stayed -1; docs/notes/issue-17.md)
+        shipped = {str(p) for p in [*camera_files(), *controller_files()]}
         files = [f for f in [*camera, *controller] if isinstance(f, str) and f not in shipped]
         return [Node(package=LOOP_NODE[0], executable=LOOP_NODE[1], output="screen",
                      parameters=[*dict.fromkeys(files), both], remappings=remaps)]
@@ -84,9 +81,11 @@ def _nodes(context: Any) -> list[Any]:
     remaps: list[tuple[str, str]] = []
     hw = _config("bfr_control", "hardware.yaml")
     lockstep = not hardware and arg("mode") == "lockstep"
-    composed = arg("loop") == "composed" if arg("loop") != "auto" else not lockstep
-    cpu = int(arg("loop_cpu")) if arg("loop_cpu") != "auto" else (
-        -1 if lockstep else loop_cpu_default())
+    cpu_arg = arg("loop_cpu")
+    if cpu_arg != "auto" and not cpu_arg.lstrip("-").isdigit():
+        raise ValueError(f"loop_cpu: expected auto, -1 or a CPU index, got {cpu_arg!r}")
+    composed, cpu = loop_layout("lockstep" if lockstep else "realtime", arg("loop"),
+                                None if cpu_arg == "auto" else int(cpu_arg))
     if hardware:
         remaps = [("camera/image_raw", arg("image_topic")),
                   ("camera/camera_info", arg("camera_info_topic"))]

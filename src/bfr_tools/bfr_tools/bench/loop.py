@@ -41,8 +41,8 @@ Per window:
 
 CPU use of each node process over the measurement (``/proc/<pid>/stat``) is reported in
 the notes: it shows which process limits the loop. The budgeted CPU figure is the camera
-and controller nodes' CPU time (user + system, both processes) per *simulated* second,
-``(cpu_camera + cpu_controller) / (t_sim_end - t_sim_start)`` [cores]: what the two nodes
+and controller nodes' CPU time (user + system: the composed process, or both processes)
+per *simulated* second, ``cpu / (t_sim_end - t_sim_start)`` [cores]: what the two nodes
 would take of a machine at real time, whatever the simulator's pace on this one (a shared
 machine that slows the simulator down does not make it look cheaper or dearer).
 """
@@ -87,7 +87,7 @@ from bfr_tools.rig import (
     LOOP_NODE,
     NODES,
     NodeSpec,
-    loop_cpu_default,
+    loop_layout,
     loop_specs,
     may_raise_priority,
     orbit_start,
@@ -294,10 +294,11 @@ def run(opts: BenchOptions, say: Progress) -> list[Figure]:
                         str(prof_dir / f"{self.name}.prof"), *super().command()]
 
         spec_cls = _Profiled
+    composed, cpu = loop_layout("realtime", "separate" if opts.loop_separate else "auto")
     loop = loop_specs({"camera": ["-p", "use_sim_time:=true"],
                        "controller": ["-p", "use_sim_time:=true",
                                       "-p", "loop.trigger:=observation"]},
-                      composed=not opts.loop_separate, cpu=loop_cpu_default(), log_dir=log_dir)
+                      composed=composed, cpu=cpu)
     nodes = {n: spec_cls(n, s.package, s.executable, s.ros_args, rename=s.rename)
              for n, s in loop.items()}
     nodes["simulator"] = spec_cls("simulator", *NODES["simulator"], sim_args)
@@ -306,12 +307,13 @@ def run(opts: BenchOptions, say: Progress) -> list[Figure]:
     try:
         nice = _NICE if may_raise_priority(_NICE) else 0
         say(f"loop: ROS_DOMAIN_ID {domain}; starting the camera and controller nodes "
-            f"({'composed' if 'loop' in loop else 'two processes'}, CPU "
-            f"{loop_cpu_default()}, nice {nice}{', sessions of their own' if nice else ''})")
+            f"({'composed' if composed else 'two processes'}, "
+            f"{f'CPU {cpu}' if cpu >= 0 else 'unpinned'}, nice {nice}"
+            f"{', sessions of their own' if nice else ''})")
         rec = _Recorder()
         for name in loop_names:
             nodes[name].start(log_dir, env, nice)
-        return _measure(opts, say, rec, nodes, nice)
+        return _measure(opts, say, rec, nodes, nice, cpu)
     finally:
         for spec in reversed(list(nodes.values())):  # the simulator first
             spec.stop()
@@ -329,7 +331,7 @@ def _dead(nodes: dict[str, Any]) -> str:
 
 
 def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
-             nodes: dict[str, Any], nice: int) -> list[Figure]:
+             nodes: dict[str, Any], nice: int, cpu: int) -> list[Figure]:
     # the simulator starts only once the camera and controller nodes are up (their
     # publishers matched), so that the ball is not left alone while they load
     ready = rec.spin_until(lambda: (rec.matched()["obs"] > 0 and rec.matched()["state"] > 0
@@ -371,6 +373,7 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
     sim_log = nodes["simulator"].log_path.read_text(errors="replace")
     behind = len(re.findall(r"behind real time", sim_log))
     composed = "loop" in nodes
+    pinned = f"pinned to CPU {cpu}" if cpu >= 0 else "unpinned"
     ctrl_log = nodes["loop" if composed else "controller"].log_path.read_text(errors="replace")
     events = [(m, t) for wall, m, t in re.findall(
         r"\[(\d+\.\d+)\] \[controller\]: (ROLLING|BALL_LOST|FAULT)(?: at t = ([0-9.]+) s)?",
@@ -430,14 +433,15 @@ def _measure(opts: BenchOptions, say: Progress, rec: _Recorder,
             "user + system CPU seconds of the "
             + ("camera and controller composed in one process (bfr_tools loop_node)"
                if composed else "camera and controller processes")
-            + f" (/proc) per simulated second of the window (sim_truth stamps), pinned to CPU "
-            f"{loop_cpu_default()} as bfr rig --realtime runs them; joint_states 1 kHz, camera "
+            + f" (/proc) per simulated second of the window (sim_truth stamps), {pinned} as bfr "
+            f"rig --realtime runs them; joint_states 1 kHz, camera "
             f"200 Hz 640x480 mono8; load {load0:.2f} at start; the nodes at their default "
             f"process.realtime_priority (SCHED_FIFO where permitted; unpinned, separate and "
             f"normal-scheduled figures: docs/notes/issue-17.md)"),
-        "cpu_camera": ("not told apart from the controller's: composed in one process "
-                       "(bfr bench --loop-separate measures each)"),
-        "cpu_controller": "not told apart from the camera's: composed in one process",
+        **({"cpu_camera": ("not told apart from the controller's: composed in one process "
+                           "(bfr bench --loop-separate measures each)"),
+            "cpu_controller": "not told apart from the camera's: composed in one process"}
+           if composed else {}),
         "real_time_factor": "simulated seconds (sim_truth stamps) per wall-clock second",
     }
     figs = []
