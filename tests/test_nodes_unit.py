@@ -14,7 +14,6 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-import yaml
 from bfr_camera.camera_node import ThetaBuffer
 from bfr_camera.camera_node import node_defaults as camera_defaults
 from bfr_model.params import load_params

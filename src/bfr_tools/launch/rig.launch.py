@@ -1,7 +1,8 @@
 """Launch the bfr rig on a real ROS 2 Jazzy install (``ros2 launch bfr_tools rig.launch.py``).
 
 Emulated rig (default): simulator, camera, controller and, with ``record:=<dir>``, the
-recorder; every node but the simulator follows its ``/clock``. The ball starts on the
+recorder, the simulator started once the recorder has matched the camera's and controller's
+publishers (as ``bfr rig``); every node but the simulator follows its ``/clock``. The ball starts on the
 controller's orbit at contact angle ``phase`` with the frame ``d_theta`` off it.
 
     ros2 launch bfr_tools rig.launch.py mode:=realtime record:=/tmp/run1
@@ -36,9 +37,16 @@ from typing import Any
 from bfr_camera.camera_node import default_files as camera_files
 from bfr_control.controller_node import default_files as controller_files
 from bfr_model.param_file import config_path
-from bfr_tools.rig import LOOP_NODE, loop_layout, orbit_start
+from bfr_tools.rig import LOOP_NODE, RECORDER_MATCH_TOPICS, loop_layout, orbit_start
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, OpaqueFunction
+from launch.actions import (
+    DeclareLaunchArgument,
+    LogInfo,
+    OpaqueFunction,
+    RegisterEventHandler,
+    TimerAction,
+)
+from launch.event_handlers import OnProcessIO
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 
@@ -95,7 +103,7 @@ def _nodes(context: Any) -> list[Any]:
     else:
         start = orbit_start(float(arg("phase")), float(arg("d_theta")))
         rec = 1 if record else 0
-        nodes.append(Node(
+        simulator = Node(
             package="bfr_sim", executable="simulator_node", name="simulator", output="screen",
             parameters=[rig, camera, _config("bfr_sim", "simulator_node.yaml"),
                         {"sim.mode": arg("mode"), "start.wait_subscribers": 2 + rec,
@@ -103,19 +111,57 @@ def _nodes(context: Any) -> list[Any]:
                          "start.wait_truth_subscribers": rec,
                          "start.wait_controller": True,
                          "start.wait_observation_subscribers": 1 + rec,
-                         "start.settle": 2.0 if rec else 0.5, **start}]))
+                         "start.settle": 2.0 if rec else 0.5, **start}])
         sim_time = {"use_sim_time": True}
         if lockstep:  # no wall-clock deadline: the normal scheduler
             sim_time["process.realtime_priority"] = 0
         nodes += _loop([camera, rig, camera_node], [rig, controller, controller_node],
                        {**sim_time, "process.cpu": cpu}, composed, [])
     if record:
-        nodes.append(Node(
+        recorder = Node(
             package="bfr_sim", executable="recorder_node", name="recorder", output="screen",
             parameters=[_config("bfr_sim", "recorder_node.yaml"), *([hw] if hardware else []),
                         {"recorder.path": record, **sim_time}],
-            remappings=remaps))
+            remappings=remaps)
+        nodes.append(recorder)
+        if not hardware:
+            nodes += _after_recorder_matched(recorder, simulator)
+    elif not hardware:
+        nodes.append(simulator)
     return nodes
+
+
+def _after_recorder_matched(recorder: Any, simulator: Any,
+                            timeout: float = 30.0) -> list[Any]:
+    """Start ``simulator`` once the recorder has matched the loop's publishers.
+
+    As ``bfr rig`` does (:data:`bfr_tools.rig.RECORDER_MATCH_TOPICS`): a reliable, volatile
+    subscription gets nothing sent before it matched, and the recorder once missed the
+    controller's first 0.125 s. The recorder logs ``matched <topic>: N publisher(s)`` once
+    per topic; after ``timeout`` seconds the simulation starts anyway, with a note.
+    """
+    seen: set[str] = set()
+    started: list[bool] = []
+
+    def start_once(why: str = "") -> list[Any]:
+        if started:
+            return []
+        started.append(True)
+        return [LogInfo(msg=why)] * bool(why) + [simulator]
+
+    def on_output(event: Any) -> list[Any] | None:
+        text = event.text.decode(errors="replace")
+        seen.update(t for t in RECORDER_MATCH_TOPICS if f"matched {t}:" in text)
+        return start_once() if seen >= set(RECORDER_MATCH_TOPICS) else None
+
+    def on_timeout(_: Any) -> list[Any]:
+        return start_once(f"the recorder had not matched {', '.join(RECORDER_MATCH_TOPICS)} "
+                          f"within {timeout:g} s; starting the simulation anyway (the bag "
+                          f"may miss their start)")
+
+    return [RegisterEventHandler(OnProcessIO(target_action=recorder, on_stdout=on_output,
+                                             on_stderr=on_output)),
+            TimerAction(period=timeout, actions=[OpaqueFunction(function=on_timeout)])]
 
 
 def generate_launch_description() -> LaunchDescription:
