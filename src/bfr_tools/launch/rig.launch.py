@@ -2,8 +2,9 @@
 
 Emulated rig (default): simulator, camera, controller and, with ``record:=<dir>``, the
 recorder, the simulator started once the recorder has matched the camera's and controller's
-publishers (as ``bfr rig``); every node but the simulator follows its ``/clock``. The ball starts on the
-controller's orbit at contact angle ``phase`` with the frame ``d_theta`` off it.
+publishers (as ``bfr rig``); every node but the simulator follows its ``/clock``. The ball
+starts on the controller's orbit at contact angle ``phase`` with the frame ``d_theta`` off
+it.
 
     ros2 launch bfr_tools rig.launch.py mode:=realtime record:=/tmp/run1
 
