@@ -475,8 +475,6 @@ def realtime_scheduling(priority: int, logger: Any = None,
         return False, f"scheduling: normal ({not_now or 'process.realtime_priority 0'})"
     if not hasattr(os, "sched_setscheduler"):
         return False, "scheduling: normal (SCHED_FIFO is not available on this system)"
-    tids = sorted(int(t) for t in os.listdir("/proc/self/task"))
-    tids.remove(threading.get_native_id())
     param = os.sched_param(priority)
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, param)  # the calling thread first
@@ -487,15 +485,29 @@ def realtime_scheduling(priority: int, logger: Any = None,
         if logger is not None:
             logger.warn(why)
         return False, why
-    switched = 1
-    for tid in tids:
-        try:
-            os.sched_setscheduler(tid, os.SCHED_FIFO, param)
-            switched += 1
-        except ProcessLookupError:  # the thread ended meanwhile
-            continue
+    switched = 1 + _each_other_thread(lambda tid: os.sched_setscheduler(tid, os.SCHED_FIFO,
+                                                                        param))
     return True, (f"scheduling: SCHED_FIFO priority {priority} ({switched} threads; "
                   f"process.realtime_priority)")
+
+
+def _each_other_thread(apply: Callable[[int], None]) -> int:
+    """Call ``apply(tid)`` for every thread of this process but the calling one.
+
+    Returns the number of threads it was applied to (a thread that ended meanwhile is
+    skipped).
+    """
+    me = threading.get_native_id()
+    done = 0
+    for tid in sorted(int(t) for t in os.listdir("/proc/self/task")):
+        if tid == me:
+            continue
+        try:
+            apply(tid)
+            done += 1
+        except ProcessLookupError:  # the thread ended meanwhile
+            continue
+    return done
 
 
 def _check_priority(priority: Any) -> None:
@@ -526,12 +538,10 @@ def pin_threads(cpu: int) -> str:
 
     A control loop pinned to one CPU keeps its caches and is never moved between CPUs; with
     its threads under ``SCHED_FIFO`` (:func:`realtime_scheduling`) the kernel otherwise
-    pushes a preempted real-time thread to the other CPU at once: the camera node's main
-    thread migrated ~700 times a second here, and the camera and controller took 0.59-0.69
-    cores per simulated second unpinned against 0.46-0.58 pinned (composed in one process:
-    0.52-0.59 against 0.37-0.44; docs/notes/issue-17.md, sixth session). ros2_control's
-    controller manager offers the same (``cpu_affinity``). Needs no privilege. Threads
-    started later inherit the affinity of the thread that starts them.
+    pushes a preempted real-time thread to another CPU at once (what that cost on the
+    development machine: docs/notes/issue-17.md, sixth session). ros2_control's controller
+    manager offers the same (``cpu_affinity``). Needs no privilege. Threads started later
+    inherit the affinity of the thread that starts them.
 
     Parameters
     ----------
@@ -552,13 +562,8 @@ def pin_threads(cpu: int) -> str:
     _check_cpu(cpu)
     if cpu == -1:
         return "any CPU (process.cpu -1)"
-    pinned = 0
-    for tid in sorted(int(t) for t in os.listdir("/proc/self/task")):
-        try:
-            os.sched_setaffinity(tid, {cpu})
-            pinned += 1
-        except ProcessLookupError:  # the thread ended meanwhile
-            continue
+    os.sched_setaffinity(0, {cpu})  # the calling thread, then the others
+    pinned = 1 + _each_other_thread(lambda tid: os.sched_setaffinity(tid, {cpu}))
     return f"CPU {cpu} only ({pinned} threads; process.cpu)"
 
 
@@ -587,9 +592,8 @@ def place_process(process: Mapping[str, Any], logger: Any = None, not_now: str =
         If a value is out of range (the message names the parameter).
     """
     check_process(process)  # both values before any change
-    cpu = process["cpu"]
-    _, scheduling = realtime_scheduling(int(process["realtime_priority"]), logger, not_now)
-    return f"{scheduling}; {pin_threads(cpu)}"
+    _, scheduling = realtime_scheduling(process["realtime_priority"], logger, not_now)
+    return f"{scheduling}; {pin_threads(process['cpu'])}"
 
 
 def freeze_heap() -> None:

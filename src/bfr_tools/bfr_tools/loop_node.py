@@ -4,19 +4,14 @@ The control loop's two nodes (``camera`` and ``controller``, the same classes, p
 and topics as ``camera_node`` and ``controller_node``) in one process with one executor,
 as an rclcpp component container would hold them. It lives here, above both packages in the
 dependency order: the controller package does not depend on the camera package. What it
-changes, measured on this 2-core machine (``bfr bench --only loop``, 200 Hz camera, 1 kHz
-encoder; docs/notes/issue-17.md, sixth session):
+changes (measured with ``bfr bench --only loop``: docs/notes/issue-17.md, sixth session):
 
 - the observation from the camera to the controller does not cross processes (Fast DDS
   delivers it inside the participant), and the 1 kHz encoder samples both nodes take are
   received once, by one DDS thread;
 - one process to pin to one CPU (``process.cpu``): with both nodes under ``SCHED_FIFO``
   in two processes, each preempted the other and the kernel moved the preempted thread to
-  the other CPU ~700 times a second.
-
-Camera + controller CPU per simulated second: 0.59-0.69 cores as two processes, 0.46-0.58
-as two processes pinned to one CPU, 0.34-0.50 (median 0.44) composed and pinned; the
-state-to-torque latency median 2.2-2.8 ms -> 1.5-2.3 ms.
+  another CPU.
 
 Parameters
 ----------
@@ -63,12 +58,12 @@ def process_settings(nodes: Iterable[Any]) -> dict[str, int]:
     nodes = list(nodes)
     for n in nodes:  # each node's values as it would check them alone
         check_process(n.process)
-    cpus = {int(n.process["cpu"]) for n in nodes} - {-1}
+    cpus = {n.process["cpu"] for n in nodes} - {-1}
     if len(cpus) > 1:
-        named = ", ".join(f"{n.get_name()} {int(n.process['cpu'])}" for n in nodes)
+        named = ", ".join(f"{n.get_name()} {n.process['cpu']}" for n in nodes)
         raise ValueError(f"process.cpu: the nodes of one process name different CPUs "
                          f"({named}); give one value")
-    return {"realtime_priority": max(int(n.process["realtime_priority"]) for n in nodes),
+    return {"realtime_priority": max(n.process["realtime_priority"] for n in nodes),
             "cpu": cpus.pop() if cpus else -1}
 
 

@@ -1,6 +1,6 @@
 """``bfr rig``: start the whole emulated rig with one command, record it, summarise the run.
 
-Starts the four nodes as separate processes exactly as ``ros2 run`` would (the executables
+Starts the four nodes as processes exactly as ``ros2 run`` would (the executables
 ``<prefix>/lib/<pkg>/<exe>`` found through the ament index, ``--ros-args`` for parameters):
 
 1. ``bfr_sim recorder_node`` (unless ``--no-record``): the bag;

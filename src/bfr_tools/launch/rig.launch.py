@@ -16,9 +16,8 @@ topics the hardware has (no ``sim_truth``) under the names the remappings give t
 
 The camera and controller nodes run composed in one process (``bfr_tools loop_node``)
 pinned to one CPU, the last of the machine (``loop:=separate`` for two processes,
-``loop_cpu:=N`` or ``-1``), as ``bfr rig --realtime`` runs them: on a 2-core machine this
-took the loop from 0.6-0.7 to 0.35-0.5 cores (docs/notes/issue-17.md); in lock-step they run
-as two processes, unpinned.
+``loop_cpu:=N`` or ``-1``), as ``bfr rig --realtime`` runs them (why, and what it saved:
+docs/hardware.md, "Scheduling"); in lock-step they run as two processes, unpinned.
 
 The default mode, ``realtime``, is the real rig's: the simulator paces itself by the wall
 clock, the controller predicts through the measured delay from a sample to its torque, and
