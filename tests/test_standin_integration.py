@@ -42,6 +42,7 @@ from bfr_control.controller import OrbitalController, load_controller_config
 from bfr_model.param_file import load_ros_parameters
 from bfr_model.params import load_params
 from bfr_ros.node_common import STATE_QOS
+from bfr_tools.rig import loop_cpu_default
 
 from bfr_interfaces.msg import BallObservation, ControllerState
 
@@ -101,11 +102,23 @@ def camera_args(camera_yaml: Path) -> list[str]:
 
 
 def start_nodes(node_processes, h: rosutil.RosHarness, camera_yaml: Path,  # noqa: ANN001
-                watch: Watch) -> tuple[rosutil.NodeProcess, rosutil.NodeProcess]:
-    """Camera and controller, as ``ros2 run`` starts them, ready before the rig starts."""
-    cam = node_processes.start("bfr_camera", "camera_node", ros_args=camera_args(camera_yaml))
-    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
-        "-p", "use_sim_time:=true"])
+                watch: Watch, composed: bool = False,
+                ) -> tuple[rosutil.NodeProcess, rosutil.NodeProcess]:
+    """Camera and controller, as ``ros2 run`` starts them, ready before the rig starts.
+
+    ``composed``: both in one ``bfr_tools loop_node`` process pinned to the last CPU, as
+    ``bfr rig --realtime`` runs them (returned twice: one process).
+    """
+    if composed:
+        cpu = loop_cpu_default()
+        cam = node_processes.start("bfr_tools", "loop_node", ros_args=[
+            *camera_args(camera_yaml), "-p", f"process.cpu:={cpu}"])
+        ctl = cam
+    else:
+        cam = node_processes.start("bfr_camera", "camera_node",
+                                   ros_args=camera_args(camera_yaml))
+        ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
+            "-p", "use_sim_time:=true"])
     h.wait_for_match(watch.state_sub, timeout=90)
     h.wait_for_match(watch.obs_sub, timeout=90)
     assert h.spin_until(lambda: "mode WAITING (no ball yet)" in ctl.output()
@@ -125,12 +138,17 @@ def camera_file(node_processes, h: rosutil.RosHarness, tmp: Path) -> Path:  # no
     return path
 
 
+@pytest.mark.parametrize("layout", ["separate", "composed"])
 def test_nodes_keep_the_standins_ball_rolling(ros_harness: rosutil.RosHarness,
-                                              node_processes, tmp_path: Path) -> None:  # noqa: ANN001
+                                              node_processes, tmp_path: Path,  # noqa: ANN001
+                                              layout: str) -> None:
     h = ros_harness
     watch = Watch(h)
     cam_yaml = camera_file(node_processes, h, tmp_path)
-    cam, ctl = start_nodes(node_processes, h, cam_yaml, watch)
+    cam, ctl = start_nodes(node_processes, h, cam_yaml, watch, composed=layout == "composed")
+    if layout == "composed":
+        assert h.spin_until(lambda: "composed with camera, controller in one process"
+                            in cam.output(), timeout=30), cam.output()[-2000:]
     duration = 4.0
     scale = 0.2
     truth_csv = tmp_path / "truth.csv"
