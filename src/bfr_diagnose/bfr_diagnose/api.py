@@ -44,7 +44,13 @@ from bfr_diagnose.identify import (
     effective_samples,
     select_effects,
 )
-from bfr_diagnose.locate import ljung_box, locate, prediction_errors, rms_by_block
+from bfr_diagnose.locate import (
+    causal_prediction_errors,
+    ljung_box,
+    locate,
+    prediction_errors,
+    rms_by_block,
+)
 from bfr_diagnose.null import (
     NullCalibration,
     PartNoise,
@@ -101,7 +107,11 @@ class PartResult:
     test_mask : ndarray of bool
         Held-out residual samples.
     pred_raw, pred_before, pred_after : dict
-        Short-horizon predictions of the same three models (with up to 400 traces).
+        Short-horizon predictions of the same three models from the smoothed state (with up
+        to 400 traces).
+    pred_causal_raw, pred_causal_before, pred_causal_after : dict
+        The same from the state each model fits to the horizon before each window
+        (:func:`~bfr_diagnose.locate.causal_prediction_errors`; no traces).
     summary : dict
         Its JSON entry.
     """
@@ -120,6 +130,9 @@ class PartResult:
     pred_raw: dict[str, Any]
     pred_before: dict[str, Any]
     pred_after: dict[str, Any]
+    pred_causal_raw: dict[str, Any]
+    pred_causal_before: dict[str, Any]
+    pred_causal_after: dict[str, Any]
     summary: dict[str, Any]
 
 
@@ -474,13 +487,15 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
         located[name] = _located(name, t_res, r0, r1, loc["windows"], part.test)
     # the held-out blocks on the grid (prediction windows start inside them)
     test_t = np.interp(np.arange(prep.n), res0.idx, part.test.astype(float)) > 0.5
-    pred_raw = prediction_errors(prep, prob.base, res_raw.phi, res_raw.phi_dot,
-                                 SensorCorrection(), test_t, keep_traces=400)
-    pred_b = prediction_errors(prep, prob.base, res0.phi, res0.phi_dot, s0, test_t,
-                               keep_traces=400)
-    pred_a = prediction_errors(prep, sel.params, res1.phi, res1.phi_dot, s1, test_t,
-                               keep_traces=400)
-    metrics = _metrics(part, before, after, located, pred_raw, pred_b, pred_a)
+    # each model from the smoothed state (the plot's traces) and from the state it fits to
+    # the horizon before each window (causal)
+    models = {"raw": (prob.base, res_raw, SensorCorrection()), "before": (prob.base, res0, s0),
+              "after": (sel.params, res1, s1)}
+    smoothed = {k: prediction_errors(prep, p, r.phi, r.phi_dot, s, test_t, keep_traces=400)
+                for k, (p, r, s) in models.items()}
+    causal = {k: causal_prediction_errors(prep, p, r.phi, r.phi_dot, s, test_t)
+              for k, (p, r, s) in models.items()}
+    metrics = _metrics(part, before, after, located, smoothed, causal)
     summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],
                "duration": float(prep.t[-1] - prep.t[0]),
                "usable_s": float(np.sum(ev.rows_mask) * opts.prep.dt),
@@ -491,8 +506,10 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
                "located": loc, "metrics": metrics}
     return PartResult(name=part.name, kind=part.kind, rows=part.rows, prep=prep, sensor0=s0,
                       sensor=s1, res_raw=res_raw, res_before=res0, res_after=res1,
-                      sigma=part.sigma, test_mask=part.test, pred_raw=pred_raw,
-                      pred_before=pred_b, pred_after=pred_a, summary=summary)
+                      sigma=part.sigma, test_mask=part.test, pred_raw=smoothed["raw"],
+                      pred_before=smoothed["before"], pred_after=smoothed["after"],
+                      pred_causal_raw=causal["raw"], pred_causal_before=causal["before"],
+                      pred_causal_after=causal["after"], summary=summary)
 
 
 def _located(name: str, t_res: np.ndarray, r0: np.ndarray, r1: np.ndarray,
@@ -511,9 +528,14 @@ def _located(name: str, t_res: np.ndarray, r0: np.ndarray, r1: np.ndarray,
 
 
 def _metrics(part: Part, before: dict[str, Any], after: dict[str, Any],
-             located: dict[str, Any], pred_raw: dict[str, Any], pred_b: dict[str, Any],
-             pred_a: dict[str, Any]) -> dict[str, Any]:
-    """Held-out fit before and after, every measure, of one recording."""
+             located: dict[str, Any], smoothed: dict[str, dict[str, Any]],
+             causal: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Held-out fit before and after, every measure, of one recording.
+
+    ``smoothed`` and ``causal`` are the predictions (``raw``, ``before``, ``after``) from the
+    smoothed state and from the state each model fits to the data before: the JSON keys
+    ``prediction_*`` and ``prediction_causal_*``.
+    """
     rows = list(before)
     comb_b = float(np.sqrt(np.mean([before[r]["rmse_over_noise"] ** 2 for r in rows])))
     comb_a = float(np.sqrt(np.mean([after[r]["rmse_over_noise"] ** 2 for r in rows])))
@@ -521,9 +543,15 @@ def _metrics(part: Part, before: dict[str, Any], after: dict[str, Any],
     def ratio(a: float | None, b: float | None) -> float | None:
         return _f(a / b) if a is not None and b is not None and b > 0 else None
 
-    pr = {k: v for k, v in pred_raw["rmse"].items()}
-    pb = {k: v for k, v in pred_b["rmse"].items()}
-    pa = {k: v for k, v in pred_a["rmse"].items()}
+    def predictions(preds: dict[str, dict[str, Any]], key: str) -> dict[str, Any]:
+        pr, pb, pa = (preds[k]["rmse"] for k in ("raw", "before", "after"))
+        return {
+            **{f"{key}_{k}": {n: v for n, v in p.items() if n != "traces"}
+               for k, p in preds.items()},
+            f"{key}_improvement": {k: ratio(pb.get(k), pa.get(k)) for k in pa},
+            f"{key}_improvement_vs_raw": {k: ratio(pr.get(k), pa.get(k)) for k in pa},
+        }
+
     return {
         "heldout_before": before, "heldout_after": after,
         "heldout_rmse_over_noise": {"before": comb_b, "after": comb_a,
@@ -531,11 +559,8 @@ def _metrics(part: Part, before: dict[str, Any], after: dict[str, Any],
         "improvement_per_signal": {r: before[r]["rmse"] / max(after[r]["rmse"], 1e-300)
                                    for r in rows},
         "located_windows": located,
-        "prediction_raw": {k: v for k, v in pred_raw.items() if k != "traces"},
-        "prediction_before": {k: v for k, v in pred_b.items() if k != "traces"},
-        "prediction_after": {k: v for k, v in pred_a.items() if k != "traces"},
-        "prediction_improvement": {k: ratio(pb.get(k), pa.get(k)) for k in pa},
-        "prediction_improvement_vs_raw": {k: ratio(pr.get(k), pa.get(k)) for k in pa},
+        **predictions(smoothed, "prediction"),
+        **predictions(causal, "prediction_causal"),
     }
 
 

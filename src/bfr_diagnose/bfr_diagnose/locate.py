@@ -24,15 +24,18 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from bfr_model.dynamics import RigidModel, frame_gravity, joint_torque
+from bfr_model.dynamics import RigidModel, frame_gravity, joint_torque, rigid_rk4_steps
+from bfr_model.jit import njit
 from bfr_model.params import RigParams
 from numpy.typing import NDArray
+from scipy.optimize import least_squares
 from scipy.stats import chi2
 
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 from bfr_diagnose.residual import ROW_NAMES, Residual
 
-__all__ = ["ljung_box", "locate", "prediction_errors", "rms_by_block"]
+__all__ = ["causal_prediction_errors", "ljung_box", "locate", "prediction_errors",
+           "rms_by_block"]
 
 FloatArray = NDArray[np.float64]
 
@@ -259,11 +262,184 @@ def rms_by_block(r: FloatArray, mask: NDArray[np.bool_]) -> float:
     return float(np.sqrt(np.mean(x ** 2))) if x.size else float("nan")
 
 
+# -- short-horizon predictions ---------------------------------------------------------------
+
+
+@njit
+def _rigid_rollout(x0, u, dt, P, R, rho0, orders, ccos, csin, bphi, bh, bw):  # noqa: ANN001, ANN202
+    """The rigid model's states ``[theta, phi, theta_dot, phi_dot]`` along a torque record.
+
+    One RK4 step of ``dt`` per torque sample (:func:`~bfr_model.dynamics.rigid_rk4_steps`,
+    ``u[k]`` held over ``[t_k, t_k + dt)``) from the 6-state ``x0``: the same arithmetic as
+    :meth:`~bfr_model.dynamics.RigidModel.step`. Shape (n + 1, 4), row 0 the start.
+    """
+    n = u.shape[0]
+    xs = np.empty((n + 1, 4))
+    x = x0.copy()
+    xs[0, :] = x[:4]
+    for k in range(n):
+        x = rigid_rk4_steps(x, 0.0, dt, 1, (u[k], P, R, rho0, orders, ccos, csin, bphi, bh,
+                                            bw))
+        xs[k + 1, :] = x[:4]
+    return xs
+
+
+@njit
+def _frame_rollout(x0, u, dt, P, jf):  # noqa: ANN001, ANN202
+    """The frame alone along a torque record (a recording without the ball).
+
+    ``J_f theta_ddot = Q(u, theta_dot) - G_f(theta)`` (:func:`~bfr_model.dynamics.joint_torque`,
+    :func:`~bfr_model.dynamics.frame_gravity`), stepped with the acceleration at the start of
+    each step: ``theta += dt theta_dot + dt^2 a / 2``, ``theta_dot += dt a`` (exact for a
+    constant acceleration). Shape (n + 1, 4) with phi and phi_dot zero.
+    """
+    n = u.shape[0]
+    xs = np.zeros((n + 1, 4))
+    th = x0[0]
+    v = x0[2]
+    xs[0, 0] = th
+    xs[0, 2] = v
+    for k in range(n):
+        a = (joint_torque(u[k], v, P) - frame_gravity(np.sin(th), np.cos(th), P)) / jf
+        th += dt * v + 0.5 * dt * dt * a
+        v += dt * a
+        xs[k + 1, 0] = th
+        xs[k + 1, 2] = v
+    return xs
+
+
+@dataclass(frozen=True, kw_only=True, eq=False)
+class _Predictor:
+    """One model's open-loop rollouts on one recording, and the measured signals to score.
+
+    Attributes
+    ----------
+    model : RigidModel
+        The model (frame inertia 1e6 on a held frame: a frame too heavy to turn).
+    dt : float
+        Grid step [s].
+    nh, step : int
+        Horizon and spacing of the window starts [samples].
+    theta, psi_w, rho : ndarray
+        Measured frame angle [rad] (with the encoder zero), ball world angle [rad] and the
+        ball's distance from the shaft [m] under the sensor correction.
+    u : ndarray
+        Torque acting at each grid time [N m].
+    usable : ndarray of bool
+        Grid samples usable (``ball_ok`` with a ball, else ``frame_ok``).
+    """
+
+    prep: Prepared
+    model: RigidModel
+    dt: float
+    nh: int
+    step: int
+    theta: FloatArray
+    psi_w: FloatArray
+    rho: FloatArray
+    u: FloatArray
+    usable: NDArray[np.bool_]
+
+    def rollout(self, x0: FloatArray, i: int, n: int) -> FloatArray:
+        """States (n + 1, 4) open loop from ``x0`` at grid sample i.
+
+        ``x0 = [theta, phi, theta_dot, phi_dot]``; the recorded torque ``u[i], ...,
+        u[i + n - 1]`` acts.
+        """
+        u = np.ascontiguousarray(self.u[i:i + n])
+        if self.prep.has_ball:
+            x = np.array([x0[0], x0[1], x0[2], x0[3], 0.0, 0.0])
+            return _rigid_rollout(x, u, self.dt, *self.model.kernel_args)
+        return _frame_rollout(np.asarray(x0, float), u, self.dt, self.model.P,
+                              self.model.params.frame.inertia)
+
+    def ball_angle(self, xs: FloatArray) -> FloatArray:
+        """The ball's world angle ``psi_w = psi(phi) - theta`` of states xs [rad]."""
+        return self.model.curve.ball_angle(xs[:, 1]) - xs[:, 0]
+
+    def starts(self, test_mask_t: NDArray[np.bool_], lead: int = 0) -> list[int]:
+        """Window starts i0 on the grid of ``step`` samples.
+
+        The scored ``[i0, i0 + nh]`` usable and held out, and with ``lead`` > 0 the ``lead``
+        samples before i0 usable too.
+        """
+        ok = self.usable & test_mask_t
+        return [i0 for i0 in range(0, self.prep.n - self.nh - 1, self.step)
+                if i0 >= lead and ok[i0:i0 + self.nh + 1].all()
+                and self.usable[i0 - lead:i0 + 1].all()]
+
+
+def _predictor(prep: Prepared, params: RigParams, sensor: SensorCorrection | None,
+               horizon: float, every: float) -> _Predictor:
+    """The :class:`_Predictor` of a model on a recording under a sensor correction."""
+    dt = float(prep.t[1] - prep.t[0])
+    sensor = sensor or SensorCorrection()
+    if prep.frame_held:  # the frame does not move: a frame too heavy to turn
+        params = params.replace(**{"frame.inertia": 1e6})
+    psi_w, _, rho = prep.ball_for(sensor)
+    return _Predictor(prep=prep, model=RigidModel(params), dt=dt,
+                      nh=max(round(horizon / dt), 1), step=max(round(every / dt), 1),
+                      theta=prep.theta + sensor.theta_zero, psi_w=psi_w, rho=rho,
+                      u=prep.u_for(sensor),
+                      usable=prep.ball_ok if prep.has_ball else prep.frame_ok)
+
+
+class _Scores:
+    """The prediction errors of the windows scored so far, and traces for the plot."""
+
+    def __init__(self, pred: _Predictor, keep_traces: int) -> None:
+        self.pred = pred
+        self.keep = keep_traces
+        self.err: dict[str, list[FloatArray]] = {"theta": [], "theta_dot": [],
+                                                 "ball_angle": []}
+        self.traces: list[dict[str, Any]] = []
+        self.n = 0
+
+    def add(self, xs: FloatArray, i0: int) -> None:
+        """Score predicted states xs at grid samples ``i0 .. i0 + nh`` against the data.
+
+        Row 0, the start, is not scored.
+        """
+        p = self.pred
+        seg = slice(i0, i0 + p.nh + 1)
+        prep = p.prep
+        ball_w = p.ball_angle(xs) if prep.has_ball else None
+        if ball_w is not None:
+            self.err["ball_angle"].append((ball_w - p.psi_w[seg])[1:])
+        if not prep.frame_held:
+            self.err["theta"].append((xs[:, 0] - p.theta[seg])[1:])
+            self.err["theta_dot"].append((xs[:, 2] - prep.theta_dot[seg])[1:])
+        self.n += 1
+        if len(self.traces) < self.keep:
+            tr = {"t": prep.t[seg].tolist(), "theta_dot": xs[:, 2].tolist()}
+            if ball_w is not None:
+                tr["ball_angle"] = ball_w.tolist()
+            self.traces.append(tr)
+
+    def result(self, horizon: float, **extra: Any) -> dict[str, Any]:
+        """``rmse`` per signal, ``n_windows``, ``horizon``, ``extra`` and the traces."""
+        rmse = {k: (float(np.sqrt(np.mean(np.concatenate(v) ** 2))) if v else float("nan"))
+                for k, v in self.err.items()}
+        out: dict[str, Any] = {"rmse": rmse, "n_windows": self.n, "horizon": horizon,
+                               **extra}
+        if self.keep:
+            out["traces"] = self.traces
+        return out
+
+
 def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_dot: FloatArray,
                       sensor: SensorCorrection | None, test_mask_t: NDArray[np.bool_],
                       horizon: float = 0.1, every: float = 0.2,
                       keep_traces: int = 0) -> dict[str, Any]:
-    """Short-horizon open-loop prediction errors on the held-out samples.
+    """Short-horizon open-loop prediction errors on the held-out samples, smoothed start.
+
+    At each window start i0 (every ``every`` seconds where ``[i0, i0 + horizon]`` is usable
+    and held out) the model starts from ``[theta, phi, theta_dot, phi_dot](i0)``: the
+    measured frame angle and rate, the kernel-smoothed contact angle and rate of the residual
+    evaluator; it runs open loop on the grid under the recorded torque (RK4; the frame alone
+    without a ball) and its errors at ``i0 + dt .. i0 + horizon`` are pooled into an RMSE.
+    The start state's own error (chiefly the smoothed phi_dot's) is common to every model:
+    :func:`causal_prediction_errors` fits each model's start instead.
 
     Parameters
     ----------
@@ -287,62 +463,186 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
     -------
     dict
         ``rmse`` per signal (``theta`` [rad], ``theta_dot`` [rad/s], ``ball_angle`` [rad]),
-        ``n_windows`` and optionally ``traces``.
+        ``n_windows``, ``horizon`` [s], ``start`` (``"smoothed"``) and optionally
+        ``traces``.
     """
-    dt = float(prep.t[1] - prep.t[0])
-    nh = max(round(horizon / dt), 1)
-    step = max(round(every / dt), 1)
-    sensor = sensor or SensorCorrection()
-    if prep.frame_held:  # the frame does not move: a frame too heavy to turn
-        params = params.replace(**{"frame.inertia": 1e6})
-    model = RigidModel(params)
-    ok = (prep.ball_ok if prep.has_ball else prep.frame_ok) & test_mask_t
-    psi_w, _ = prep.psi_for(sensor)
-    u = prep.u_for(sensor)
-    theta = prep.theta + sensor.theta_zero
-    err: dict[str, list] = {"theta": [], "theta_dot": [], "ball_angle": []}
-    traces = []
-    n_win = 0
-    jf = params.frame.inertia
-    for i0 in range(0, prep.n - nh - 1, step):
-        if not ok[i0:i0 + nh + 1].all():
+    pred = _predictor(prep, params, sensor, horizon, every)
+    scores = _Scores(pred, keep_traces)
+    for i0 in pred.starts(test_mask_t):
+        if prep.has_ball and not (np.isfinite(phi[i0]) and np.isfinite(phi_dot[i0])):
             continue
-        seg = slice(i0, i0 + nh + 1)
-        if prep.has_ball:
-            if not (np.isfinite(phi[i0]) and np.isfinite(phi_dot[i0])):
-                continue
-            x = np.array([theta[i0], phi[i0], prep.theta_dot[i0], phi_dot[i0], 0.0, 0.0])
-            xs = np.empty((nh + 1, 4))
-            xs[0] = x[:4]
-            for k in range(nh):
-                x = model.step(x, u[i0 + k], dt, 1)
-                xs[k + 1] = x[:4]
-            if not np.all(np.isfinite(xs)):
-                continue
-            ball_w = model.curve.ball_angle(xs[:, 1]) - xs[:, 0]
-            err["ball_angle"].append((ball_w - psi_w[seg])[1:])
-        else:
-            th, v = theta[i0], prep.theta_dot[i0]
-            xs = np.empty((nh + 1, 4))
-            xs[0] = [th, 0.0, v, 0.0]
-            for k in range(nh):
-                a = (joint_torque(u[i0 + k], v, model.P)
-                     - frame_gravity(np.sin(th), np.cos(th), model.P)) / jf
-                th += dt * v + 0.5 * dt * dt * a
-                v += dt * a
-                xs[k + 1] = [th, 0.0, v, 0.0]
+        x0 = np.array([pred.theta[i0], phi[i0] if prep.has_ball else 0.0,
+                       prep.theta_dot[i0], phi_dot[i0] if prep.has_ball else 0.0])
+        xs = pred.rollout(x0, i0, pred.nh)
+        if not np.all(np.isfinite(xs)):
+            continue
+        scores.add(xs, i0)
+    return scores.result(horizon, start="smoothed")
+
+
+#: Scale of each state in the start-state fit: theta, phi [rad], theta_dot, phi_dot [rad/s]
+#: (``x_scale`` of the solver; the finite-difference steps are 1e-4 of it).
+_STATE_SCALE = np.array([1e-3, 1e-3, 0.1, 0.1])
+
+#: Noise below which a measured angle's noise is taken as this [rad] (an exact encoder, a
+#: noise-free simulation): the weights stay finite.
+_NOISE_FLOOR = 1e-6
+
+#: Residual of a start state whose rollout is not finite (far above any fit's, in noise units).
+_PENALTY = 1e6
+
+
+def _noise_rad(x: float | None) -> float:
+    """A noise level [rad], floored at :data:`_NOISE_FLOOR` (and where not estimated)."""
+    return float(x) if x is not None and np.isfinite(x) and x > _NOISE_FLOOR else _NOISE_FLOOR
+
+
+@dataclass(frozen=True, kw_only=True)
+class _StartFit:
+    """A start state fitted to the measurements of a fit window.
+
+    Attributes
+    ----------
+    state : ndarray
+        ``[theta, phi, theta_dot, phi_dot]`` at the fit window's first sample.
+    rms : float
+        RMS of the noise-normalised residual over the fit window [-].
+    """
+
+    state: FloatArray
+    rms: float
+
+
+def _fit_start(pred: _Predictor, guess: FloatArray, j: int, nw: int) -> _StartFit | None:
+    """The start state at grid sample j that best explains the measurements on ``[j, j + nw]``.
+
+    Unknowns: all four states when the ball rolls on a turning frame; ``(theta, theta_dot)``
+    without a ball; ``(phi, phi_dot)`` on a held frame (theta and theta_dot stay measured).
+    Residuals, each over its noise: the frame angle ``(theta_m(x0; t_k) - theta(t_k)) /
+    sigma_theta`` (not on a held frame) and the ball's world angle ``(psi_w,m(x0; t_k) -
+    psi_w(t_k)) / (sigma_cam / rho)`` with a ball, ``sigma_cam`` the camera's noise per axis
+    [m] over the ball's *measured* distance from the shaft rho (median over the fit window,
+    after the sensor's scale; the model's at the guess where none is measured): the same
+    weights for every model. Levenberg-Marquardt (``scipy.optimize.least_squares``) on the
+    deviation from the guess, forward-difference Jacobian with steps of 1e-4 of
+    :data:`_STATE_SCALE`.
+
+    Returns
+    -------
+    _StartFit or None
+        None when the solver fails or the fitted rollout is not finite.
+    """
+    prep = pred.prep
+    free = ([1, 3] if prep.frame_held else [0, 1, 2, 3]) if prep.has_ball else [0, 2]
+    seg = slice(j, j + nw + 1)
+    th_m = pred.theta[seg]
+    sig_th = _noise_rad(prep.noise.get("theta"))
+    psi_m = pred.psi_w[seg]
+    if prep.has_ball:
+        rho = pred.rho[seg]
+        rho = rho[np.isfinite(rho)]
+        dist = (float(np.median(rho)) if rho.size else
+                float(np.hypot(*pred.model.ball_position(guess[:4]))))
+        sig_psi = _noise_rad(prep.noise.get("camera", np.nan) / dist)
+    m = (0 if prep.frame_held else nw + 1) + (nw + 1 if prep.has_ball else 0)
+
+    def residual(dz: FloatArray) -> FloatArray:
+        x0 = guess.copy()
+        x0[free] += dz
+        xs = pred.rollout(x0, j, nw)
+        if not np.all(np.isfinite(xs)):
+            return np.full(m, _PENALTY)
+        r = []
         if not prep.frame_held:
-            err["theta"].append((xs[:, 0] - theta[seg])[1:])
-            err["theta_dot"].append((xs[:, 2] - prep.theta_dot[seg])[1:])
-        n_win += 1
-        if len(traces) < keep_traces:
-            tr = {"t": prep.t[seg].tolist(), "theta_dot": xs[:, 2].tolist()}
-            if prep.has_ball:
-                tr["ball_angle"] = (model.curve.ball_angle(xs[:, 1]) - xs[:, 0]).tolist()
-            traces.append(tr)
-    rmse = {k: (float(np.sqrt(np.mean(np.concatenate(v) ** 2))) if v else float("nan"))
-            for k, v in err.items()}
-    out: dict[str, Any] = {"rmse": rmse, "n_windows": n_win, "horizon": horizon}
-    if keep_traces:
-        out["traces"] = traces
-    return out
+            r.append((xs[:, 0] - th_m) / sig_th)
+        if prep.has_ball:
+            r.append((pred.ball_angle(xs) - psi_m) / sig_psi)
+        return np.concatenate(r)
+
+    h = 1e-4 * _STATE_SCALE[free]
+    last: dict[str, FloatArray] = {}
+
+    def fun(dz: FloatArray) -> FloatArray:
+        last["dz"], last["r"] = dz.copy(), residual(dz)
+        return last["r"]
+
+    def jac(dz: FloatArray) -> FloatArray:
+        r0 = last["r"] if "dz" in last and np.array_equal(last["dz"], dz) else residual(dz)
+        cols = []
+        for c in range(dz.size):
+            e = dz.copy()
+            e[c] += h[c]
+            cols.append((residual(e) - r0) / h[c])
+        return np.column_stack(cols)
+
+    sol = least_squares(fun, np.zeros(len(free)), jac=jac, method="lm",
+                        x_scale=_STATE_SCALE[free], max_nfev=50 * len(free))
+    x0 = guess.copy()
+    x0[free] += sol.x
+    if sol.status <= 0 or not np.all(np.isfinite(x0)):
+        return None
+    r = residual(sol.x)
+    if np.any(r == _PENALTY):
+        return None
+    return _StartFit(state=x0, rms=float(np.sqrt(np.mean(r ** 2))))
+
+
+def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
+                             phi_dot: FloatArray, sensor: SensorCorrection | None,
+                             test_mask_t: NDArray[np.bool_], horizon: float = 0.1,
+                             every: float = 0.2, fit_window: float | None = None,
+                             keep_traces: int = 0) -> dict[str, Any]:
+    """Short-horizon prediction errors on the held-out samples, the start fitted before.
+
+    Causal and model-based: Ljung's k-step prediction with the initial state estimated from
+    the past data.
+
+    At each window start i0 (the windows of :func:`prediction_errors` whose ``fit_window``
+    W before i0 is usable too) the model's state at ``i0 - W`` is fitted to the measured
+    frame angle and ball world angle on ``[i0 - W, i0]`` (:func:`_fit_start`, started from
+    the smoothed state there); the model then runs open loop from ``i0 - W`` through i0 to
+    ``i0 + horizon`` under the recorded torque, and only its errors on ``(i0, i0 +
+    horizon]``, data the fit never saw and held out from the identification, are scored.
+    Each model estimates its own start (a wrong model's estimate is worse: that is part of
+    its prediction), so the figure measures the model, not the smoother. Windows whose fit
+    fails or whose rollout diverges are skipped and counted.
+
+    Parameters
+    ----------
+    prep, params, phi, phi_dot, sensor, test_mask_t, horizon, every, keep_traces
+        As :func:`prediction_errors` (phi and phi_dot only give the fit's starting guess).
+    fit_window : float, optional
+        Length W of the fit window before each start [s] (default: the horizon).
+
+    Returns
+    -------
+    dict
+        As :func:`prediction_errors`, with ``start`` = ``"fitted"``, ``fit_window`` [s],
+        ``n_skipped`` (windows whose fit failed or diverged) and ``fit_rms_over_noise``
+        (the fits' residual RMS over the noise, pooled); each trace also holds the fitted
+        start (``fit_t`` [s], ``fit_state``).
+    """
+    pred = _predictor(prep, params, sensor, horizon, every)
+    nw = max(round((horizon if fit_window is None else fit_window) / pred.dt), 1)
+    scores = _Scores(pred, keep_traces)
+    skipped = 0
+    fit_ms: list[float] = []
+    for i0 in pred.starts(test_mask_t, lead=nw):
+        j = i0 - nw
+        guess = np.array([pred.theta[j], phi[j] if prep.has_ball else 0.0,
+                          prep.theta_dot[j], phi_dot[j] if prep.has_ball else 0.0])
+        if not np.all(np.isfinite(guess)):
+            continue
+        fit = _fit_start(pred, guess, j, nw)
+        xs = None if fit is None else pred.rollout(fit.state, j, nw + pred.nh)
+        if xs is None or not np.all(np.isfinite(xs)):
+            skipped += 1
+            continue
+        fit_ms.append(fit.rms ** 2)
+        n_tr = len(scores.traces)
+        scores.add(xs[nw:], i0)
+        if len(scores.traces) > n_tr:
+            scores.traces[-1].update(fit_t=float(prep.t[j]), fit_state=fit.state.tolist())
+    return scores.result(horizon, start="fitted", fit_window=nw * pred.dt, n_skipped=skipped,
+                         fit_rms_over_noise=(float(np.sqrt(np.mean(fit_ms))) if fit_ms
+                                             else float("nan")))
