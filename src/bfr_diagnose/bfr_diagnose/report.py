@@ -32,6 +32,24 @@ __all__ = ["corrected_yaml", "format_text", "phi_dot_profiles", "sensor_yaml",
 
 _UNITS = {"theta": "rad", "theta_dot": "rad/s", "ball_angle": "rad"}
 
+#: The metrics' keys of the short-horizon predictions: from the smoothed state, and from the
+#: state each model fits to the data before (locate.prediction_errors,
+#: locate.causal_prediction_errors).
+_PREDICTIONS = ("prediction", "prediction_causal")
+
+
+def _prediction_start(pred: dict[str, Any]) -> str:
+    """Where a prediction starts, in words (its ``start`` and ``fit_window``)."""
+    if pred.get("start") == "fitted":
+        return (f"from the state the model fits to the {pred['fit_window'] * 1e3:.0f} ms "
+                "before")
+    return "from the smoothed state"
+
+
+def _ratio(a: float | None, b: float | None) -> float | None:
+    """``a / b``, or None when either is missing or b is not positive."""
+    return a / b if a is not None and b is not None and b > 0 else None
+
 
 def _used(row: dict[str, Any]) -> str:
     """'yes', or 'no' with the reason a per-recording value was left out of the joint one."""
@@ -132,10 +150,16 @@ def format_text(s: dict[str, Any]) -> str:
         h = m["heldout_rmse_over_noise"]
         out.append(f"{Path(rec['name']).name} ({rec['kind']}): held-out equation error / "
                    f"noise {h['before']:.3g} -> {h['after']:.3g} (x{h['improvement_factor']:.2f})")
-        pb, pa = m["prediction_before"]["rmse"], m["prediction_after"]["rmse"]
-        out.append("  prediction RMSE (" + f"{m['prediction_before']['horizon'] * 1e3:.0f} "
-                   "ms): " + ", ".join(f"{k} {_num(pb[k], '.3g')} -> {_num(pa[k], '.3g')}"
-                                       for k in pb if _num(pb[k]) != "n/a"))
+        for key in _PREDICTIONS:
+            if f"{key}_before" not in m:
+                continue
+            start = _prediction_start(m[f"{key}_before"])
+            pb, pa = m[f"{key}_before"]["rmse"], m[f"{key}_after"]["rmse"]
+            out.append(f"  {m[f'{key}_before']['horizon'] * 1e3:.0f} ms prediction RMSE "
+                       f"{start}: " + ", ".join(
+                           f"{k} {_num(pb[k], '.3g')} -> {_num(pa[k], '.3g')} "
+                           f"(x{_num(_ratio(pb[k], pa[k]), '.3g')})"
+                           for k in pb if _num(pb[k]) != "n/a"))
     out.append(f"wall time {s['wall_time_s']:.1f} s")
     return "\n".join(out)
 
@@ -250,16 +274,19 @@ def _md_fit(d: Diagnosis) -> list[str]:
                      f"{a['rmse']:.3g} | {v['rmse'] / max(a['rmse'], 1e-300):.3g} | "
                      f"{_num(v['whiteness']['p_value'], '.2g')} -> "
                      f"{_num(a['whiteness']['p_value'], '.2g')} |")
-        pr_, pb, pa = (m["prediction_raw"]["rmse"], m["prediction_before"]["rmse"],
-                       m["prediction_after"]["rmse"])
-        for k in pb:
-            if pb[k] is None or not math.isfinite(pb[k]):
+        for key in _PREDICTIONS:
+            if f"{key}_before" not in m:
                 continue
-            L.append(f"| {Path(pr.name).name} | "
-                     f"{m['prediction_before']['horizon'] * 1e3:.0f} ms open-loop prediction "
-                     f"{k} [{_UNITS[k]}] (raw {_num(pr_.get(k), '.3g')}) | {_num(pb[k], '.3g')} "
-                     f"| {_num(pa[k], '.3g')} | {_num(pb[k] / pa[k] if pa[k] else None, '.3g')} "
-                     "| |")
+            start = _prediction_start(m[f"{key}_before"])
+            pr_, pb, pa = (m[f"{key}_{k}"]["rmse"] for k in ("raw", "before", "after"))
+            h = m[f"{key}_before"]["horizon"] * 1e3
+            for k in pb:
+                if pb[k] is None or not math.isfinite(pb[k]):
+                    continue
+                L.append(f"| {Path(pr.name).name} | {h:.0f} ms prediction {start}: {k} "
+                         f"[{_UNITS[k]}] (raw {_num(pr_.get(k), '.3g')}) | "
+                         f"{_num(pb[k], '.3g')} | {_num(pa[k], '.3g')} | "
+                         f"{_num(_ratio(pb[k], pa[k]), '.3g')} | |")
     return [*L, ""]
 
 
@@ -446,8 +473,9 @@ def _plot_overlay(plt: Any, pr: PartResult, out: Path, k: int) -> str:
                                                         "physics)")):
             ref = prep.psi_for(sensor)[0] if prep.has_ball else prep.theta_dot
             ax.plot(prep.t[m] - t0, ref[m], style, lw=1.0, label=label)
-        for traces, colour, label in ((tr_b, "C0", "nominal 100 ms prediction"),
-                                      (tr_a, "C1", "corrected 100 ms prediction")):
+        for traces, colour, label in (
+                (tr_b, "C0", "nominal 100 ms prediction (from the smoothed state)"),
+                (tr_a, "C1", "corrected 100 ms prediction (from the smoothed state)")):
             shown = [tr for tr in traces if lo <= tr["t"][0] <= hi]
             for i, tr in enumerate(shown):
                 ax.plot(np.array(tr["t"]) - t0, tr[key], colour, lw=1,
