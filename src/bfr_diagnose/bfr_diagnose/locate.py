@@ -643,6 +643,7 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
         scores.add(xs[nw:], i0)
         if len(scores.traces) > n_tr:
             scores.traces[-1].update(fit_t=float(prep.t[j]), fit_state=fit.state.tolist())
-    return scores.result(horizon, start="fitted", fit_window=nw * pred.dt, n_skipped=skipped,
+    return scores.result(horizon, start="fitted", fit_window=round(nw * pred.dt, 9),
+                         n_skipped=skipped,
                          fit_rms_over_noise=(float(np.sqrt(np.mean(fit_ms))) if fit_ms
                                              else float("nan")))
