@@ -10,11 +10,14 @@ state regions (frame speed and its sign, the ball's place on the frame ``phi mod
 torque level, normal force i.e. contact phase) are flagged where the p-value is below
 ``alpha`` divided by the number of tests (Bonferroni).
 
-Short-horizon prediction: from the smoothed state at the start of each window the model is
-integrated open loop (RK4 on the grid, the recorded torque) for ``horizon`` seconds; the
-prediction error of theta, theta_dot and the ball's world angle is the fit measure a person
-can picture. Residual whiteness: Ljung-Box statistic of the residual taken once per kernel
-width (near-independent samples).
+Short-horizon prediction: the model is integrated open loop (RK4 on the grid, the recorded
+torque) for ``horizon`` seconds from the start of each held-out window; the prediction error
+of theta, theta_dot and the ball's world angle is the fit measure a person can picture. Two
+starts: the smoothed state (:func:`prediction_errors`; its error, chiefly the smoothed
+phi_dot's, is common to every model) and the state the model itself fits to the
+``horizon`` before the window (:func:`causal_prediction_errors`: Ljung's k-step prediction,
+causal and model-based). Residual whiteness: Ljung-Box statistic of the residual taken once
+per kernel width (near-independent samples).
 """
 
 from __future__ import annotations
@@ -314,6 +317,8 @@ class _Predictor:
 
     Attributes
     ----------
+    prep : Prepared
+        The preprocessed recording.
     model : RigidModel
         The model (frame inertia 1e6 on a held frame: a frame too heavy to turn).
     dt : float
