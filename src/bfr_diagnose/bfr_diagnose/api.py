@@ -111,7 +111,8 @@ class PartResult:
         to 400 traces).
     pred_causal_raw, pred_causal_before, pred_causal_after : dict
         The same from the state each model fits to the horizon before each window
-        (:func:`~bfr_diagnose.locate.causal_prediction_errors`; no traces).
+        (:func:`~bfr_diagnose.locate.causal_prediction_errors`; up to 400 traces, the
+        open-loop panel of ``phi_dot.png``).
     summary : dict
         Its JSON entry.
     """
@@ -493,7 +494,8 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
               "after": (sel.params, res1, s1)}
     smoothed = {k: prediction_errors(prep, p, r.phi, r.phi_dot, s, test_t, keep_traces=400)
                 for k, (p, r, s) in models.items()}
-    causal = {k: causal_prediction_errors(prep, p, r.phi, r.phi_dot, s, test_t)
+    causal = {k: causal_prediction_errors(prep, p, r.phi, r.phi_dot, s, test_t,
+                                          keep_traces=400)
               for k, (p, r, s) in models.items()}
     metrics = _metrics(part, before, after, located, smoothed, causal)
     summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],

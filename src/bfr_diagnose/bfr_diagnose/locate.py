@@ -37,8 +37,8 @@ from scipy.stats import chi2
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 from bfr_diagnose.residual import ROW_NAMES, Residual
 
-__all__ = ["causal_prediction_errors", "ljung_box", "locate", "prediction_errors",
-           "rms_by_block"]
+__all__ = ["causal_prediction_errors", "ljung_box", "locate", "phi_dot_misfit_by_place",
+           "prediction_errors", "rms_by_block"]
 
 FloatArray = NDArray[np.float64]
 
@@ -419,6 +419,8 @@ class _Scores:
             tr = {"t": prep.t[seg].tolist(), "theta_dot": xs[:, 2].tolist()}
             if ball_w is not None:
                 tr["ball_angle"] = ball_w.tolist()
+                tr["phi"] = xs[:, 1].tolist()
+                tr["phi_dot"] = xs[:, 3].tolist()
             self.traces.append(tr)
 
     def result(self, horizon: float, **extra: Any) -> dict[str, Any]:
@@ -652,3 +654,36 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
                          n_skipped=skipped,
                          fit_rms_over_noise=(float(np.sqrt(np.mean(fit_ms))) if fit_ms
                                              else float("nan")))
+
+
+def phi_dot_misfit_by_place(pred: dict[str, Any], phi_dot: FloatArray, t: FloatArray,
+                            edges: FloatArray) -> FloatArray:
+    """Where on the frame a model's predicted ball speed departs from the measured one.
+
+    Over the traces of a prediction (:func:`causal_prediction_errors` or
+    :func:`prediction_errors` with ``keep_traces``), at every scored sample (the start
+    excluded): ``d = phi_dot_pred - phi_dot_meas``, the measured rate that model's own
+    (its residual's smoothed contact rate on the grid ``t``); binned by the predicted
+    ``phi mod pi`` on ``edges`` [rad], the RMS of d per bin [rad/s].
+
+    Returns
+    -------
+    ndarray
+        ``len(edges) - 1`` values, NaN where no sample falls (or the traces hold no ball).
+    """
+    phis, diffs = [], []
+    for tr in pred.get("traces", []):
+        if "phi_dot" not in tr:
+            continue
+        idx = np.searchsorted(t, np.asarray(tr["t"][1:]) - 1e-9)
+        phis.append(np.asarray(tr["phi"][1:]))
+        diffs.append(np.asarray(tr["phi_dot"][1:]) - phi_dot[idx])
+    n_bins = edges.size - 1
+    if not phis:
+        return np.full(n_bins, np.nan)
+    phi, dif = np.concatenate(phis), np.concatenate(diffs)
+    ok = np.isfinite(phi) & np.isfinite(dif)
+    k = np.digitize(np.mod(phi[ok], np.pi), edges) - 1
+    v = dif[ok]
+    return np.array([float(np.sqrt(np.mean(v[k == i] ** 2))) if np.any(k == i) else np.nan
+                     for i in range(n_bins)])

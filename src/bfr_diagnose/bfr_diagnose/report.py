@@ -25,6 +25,7 @@ from bfr_model.params import params_to_ros_yaml
 
 from bfr_diagnose.api import Diagnosis, PartResult
 from bfr_diagnose.effects import DESTINATION, EFFECTS, display_values
+from bfr_diagnose.locate import phi_dot_misfit_by_place
 from bfr_diagnose.synth import SynthConfig, stabilised_recording
 
 __all__ = ["corrected_yaml", "format_text", "phi_dot_profiles", "sensor_yaml",
@@ -518,6 +519,12 @@ class PhiDotProfiles:
         Mean phi_dot per bin [rad/s]: the recording (through the corrected model's
         measurement model), and the nominal and corrected physics in closed loop with the
         nominal controller (NaN where no sample, or where that loop lost the ball).
+    open_nominal, open_corrected : ndarray
+        Under the recorded frame motion and torque, the RMS per bin [rad/s] of each model's
+        phi_dot predicted open loop (the 100 ms after the state it fits to the 100 ms
+        before, :func:`~bfr_diagnose.locate.causal_prediction_errors`) minus the measured
+        phi_dot at the same instants (each in that model's contact angle; binned by the
+        predicted phi). NaN where no held-out window reaches.
     notes : list of str
         What each closed loop did.
     """
@@ -526,6 +533,8 @@ class PhiDotProfiles:
     measured: np.ndarray
     nominal: np.ndarray
     corrected: np.ndarray
+    open_nominal: np.ndarray
+    open_corrected: np.ndarray
     notes: list[str]
 
     def rms(self, which: str) -> float:
@@ -540,9 +549,13 @@ def phi_dot_profiles(d: Diagnosis, pr: PartResult, duration: float = 15.0,
                      n_bins: int = 36) -> PhiDotProfiles:
     """The ball's speed along the frame: measured, and simulated with either physics.
 
-    The simulations run the node suite's controller on its nominal model (as on the rig)
-    against the nominal plant and against the corrected plant (:attr:`Diagnosis.corrected`:
-    the plausible effects), started on the controller's orbit; the first 3 s are dropped.
+    Closed loop: the simulations run the node suite's controller on its nominal model (as
+    on the rig) against the nominal plant and against the corrected plant
+    (:attr:`Diagnosis.corrected`: the plausible effects), started on the controller's
+    orbit; the first 3 s are dropped. The rig's own controller is not this one, so the
+    closed-loop profiles compare orbits, not physics alone. Open loop: under the recorded
+    frame motion and torque, each model's misfit of phi_dot 100 ms ahead
+    (:func:`~bfr_diagnose.locate.phi_dot_misfit_by_place`), where the physics alone differ.
     """
     edges = np.linspace(0.0, np.pi, n_bins + 1)
     centres = 0.5 * (edges[1:] + edges[:-1])
@@ -569,30 +582,56 @@ def phi_dot_profiles(d: Diagnosis, pr: PartResult, duration: float = 15.0,
                         "the nominal controller lost the ball (profile until then)")
                      + f", mean phi_dot {rec.meta['loop']['mean_phi_dot']:.3f} rad/s")
     return PhiDotProfiles(centres=centres, measured=measured, nominal=sims["nominal"],
-                          corrected=sims["corrected"], notes=notes)
+                          corrected=sims["corrected"],
+                          open_nominal=phi_dot_misfit_by_place(
+                              pr.pred_causal_before, pr.res_before.phi_dot, pr.prep.t, edges),
+                          open_corrected=phi_dot_misfit_by_place(
+                              pr.pred_causal_after, pr.res_after.phi_dot, pr.prep.t, edges),
+                          notes=notes)
 
 
 def _plot_phi_dot(plt: Any, d: Diagnosis, pr: PartResult, out: Path) -> str:
-    """``phi_dot.png``: the ball's speed along the frame (:func:`phi_dot_profiles`)."""
+    """``phi_dot.png``: the ball's speed along the frame (:func:`phi_dot_profiles`).
+
+    Top: measured and closed-loop profiles. Bottom: the open-loop misfit of each model
+    under the recorded frame motion (the physics alone).
+    """
     prof = phi_dot_profiles(d, pr)
-    fig, ax = plt.subplots(figsize=(9, 3.6))
+    fig, (ax, ax2) = plt.subplots(2, 1, figsize=(9, 6.4), sharex=True)
     deg = np.degrees(prof.centres)
     ax.plot(deg, prof.measured, "k.-", label=f"measured ({Path(pr.name).name})")
     ax.plot(deg, prof.nominal, "C0-", label=f"nominal model in closed loop (rms diff. "
                                              f"{prof.rms('nominal'):.3f} rad/s)")
     ax.plot(deg, prof.corrected, "C1-", label=f"corrected model in closed loop (rms diff. "
                                                f"{prof.rms('corrected'):.3f} rad/s)")
-    ax.set_xlabel("ball's place on the frame: contact angle phi mod 180 [deg]")
     ax.set_ylabel("phi_dot [rad/s]")
-    ax.set_title("the ball's speed along the frame", fontsize=9)
+    ax.set_title("the ball's speed along the frame (closed loop: bfr's controller, not the "
+                 "rig's)", fontsize=9)
     ax.legend(fontsize=7)
+    rms_open = {k: _finite(float(np.sqrt(np.nanmean(v ** 2)))) if np.isfinite(v).any()
+                else None for k, v in (("nominal", prof.open_nominal),
+                                       ("corrected", prof.open_corrected))}
+    for v, colour, label in ((prof.open_nominal, "C0", "nominal"),
+                             (prof.open_corrected, "C1", "corrected")):
+        over = rms_open[label]
+        ax2.plot(deg, v, colour + ".-", label=f"{label} physics (rms over bins "
+                 + (f"{over:.3f}" if over is not None else "n/a") + " rad/s)")
+    ax2.set_ylabel("RMS predicted - measured\nphi_dot [rad/s]")
+    ax2.set_title("under the recorded frame motion: phi_dot 100 ms ahead of the state each "
+                  "model fits (held-out windows)", fontsize=9)
+    ax2.set_xlabel("ball's place on the frame: contact angle phi mod 180 [deg]")
+    ax2.legend(fontsize=7)
     d.findings.setdefault("phi_dot_profile", {
         "recording": pr.name, "phi_deg": deg.tolist(),
         "measured": [_finite(v) for v in prof.measured],
         "nominal": [_finite(v) for v in prof.nominal],
         "corrected": [_finite(v) for v in prof.corrected],
         "rms_nominal": _finite(prof.rms("nominal")),
-        "rms_corrected": _finite(prof.rms("corrected")), "notes": prof.notes})
+        "rms_corrected": _finite(prof.rms("corrected")),
+        "open_loop_misfit_nominal": [_finite(v) for v in prof.open_nominal],
+        "open_loop_misfit_corrected": [_finite(v) for v in prof.open_corrected],
+        "open_loop_rms_nominal": rms_open["nominal"],
+        "open_loop_rms_corrected": rms_open["corrected"], "notes": prof.notes})
     return _save(plt, fig, out, "phi_dot.png")
 
 
