@@ -16,7 +16,10 @@ Steps (docs/diagnosis.md):
    a sensor correction (:meth:`Prepared.u_for`: ``u(t - d_u)``), fitted per recording.
 4. Ball. Only the distinct camera fixes are used (a log holds the last fix between fixes,
    at any ratio of lines to fixes). A fix's time is its own stamp when the source has one
-   (a bag's header stamp), else the line where it first appears. The fix at ``t_f`` shows
+   (a bag's header stamp), else the line where it first appears, moved onto the camera's
+   steady clock when the arrivals show one (:func:`bfr_model.io.timing.camera_clock`: the
+   wait for the next line is a slowly drifting latency where the camera's and the log's
+   rates are nearly commensurate; measured and reported per recording). The fix at ``t_f`` shows
    the ball where it was at ``t_f - L`` (camera latency L): its world polar angle
    ``psi_w = atan2(x - c_x, y - c_y) + alpha`` (clockwise from +y, the rig's convention;
    ``c`` a camera origin offset, ``alpha`` a camera rotation: the camera logs
@@ -50,7 +53,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from bfr_model.io.timing import corrected_velocity, velocity_lag
+from bfr_model.io.timing import CameraClock, camera_clock, corrected_velocity, velocity_lag
 from bfr_model.recording import Recording
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
@@ -506,6 +509,8 @@ def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0
     info["theta_coarse"] = bool(res > cfg.coarse_theta)
     ball = _ball(rec, tg, cfg, latency0)
     info["ball"] = ball.note
+    if ball.clock is not None:
+        info["camera_clock"] = ball.clock.to_json()
     held = ball.has_ball and (frame_held(rec, res) if held is None else held)
     if held:
         # the frame does not turn: its angle is constant, its rates zero
@@ -625,6 +630,7 @@ class _Ball:
     noise: float                   # [m] camera noise per axis (NaN if not estimated)
     fixes: _Fixes | None           # the raw fixes (only when the ball rows apply)
     note: str                      # what was found (for the report)
+    clock: CameraClock | None = None  # how the fixes were timed (no stamps: line arrivals)
 
 
 def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _Ball:
@@ -648,7 +654,7 @@ def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _
         nan = np.full(tg.size, np.nan)
         return _Ball(has_ball=False, psi_w=nan, psi_w_dot=nan.copy(), rho=nan.copy(), xy=None,
                      ok=np.zeros(tg.size, bool), noise=float("nan"), fixes=None, note=note)
-    fixes, ball_ok = _ball_fixes(rec, nfix, tg, cfg, latency0)
+    fixes, ball_ok, clock = _ball_fixes(rec, nfix, tg, cfg, latency0)
     bxy = np.vstack(_smooth_ball(fixes, tg))
     psi_w = _world_angle(bxy[0], bxy[1])
     rho = np.hypot(bxy[0], bxy[1])
@@ -661,20 +667,25 @@ def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _
                                 f"gaps under {cfg.max_gap * 1e3:.0f} ms)")
         return _Ball(has_ball=False, psi_w=psi_w, psi_w_dot=psi_wd, rho=rho, xy=None,
                      ok=ball_ok, noise=noise_cam, fixes=None,
-                     note="no usable ball segment: frame-only analysis")
+                     note="no usable ball segment: frame-only analysis", clock=clock)
+    timing = ("fixes at their own stamps" if clock is None else
+              f"camera clock {1.0 / clock.period:.2f} Hz, fixes placed on it" if clock.used
+              else "fixes at their lines' times (no steady camera clock)")
     return _Ball(has_ball=True, psi_w=psi_w, psi_w_dot=psi_wd, rho=rho, xy=bxy, ok=ball_ok,
                  noise=noise_cam, fixes=fixes,
                  note=(f"{len(segments_from_mask(ball_ok))} ball segment(s), "
                        f"{ball_ok.mean() * 100:.0f} % of the run; {int(nfix.sum())} fixes "
-                       f"({rec.camera_fix_rate():.0f} per second)"))
+                       f"({rec.camera_fix_rate():.0f} per second); {timing}"), clock=clock)
 
 
 def _ball_fixes(rec: Recording, nfix: NDArray[np.bool_], tg: FloatArray, cfg: PrepConfig,
-                latency0: float) -> tuple[_Fixes, NDArray[np.bool_]]:
+                latency0: float) -> tuple[_Fixes, NDArray[np.bool_], CameraClock | None]:
     """The distinct fixes, placed at ``t_fix - latency0`` and cut into segments at gaps.
 
     ``t_fix`` is the fix's own stamp when the source has one, else its line's time
-    (:meth:`bfr_model.recording.Recording.fix_times`). A segment needs 10 fixes,
+    (:meth:`bfr_model.recording.Recording.fix_times`), placed on the camera's steady clock
+    when the arrivals show one (:func:`bfr_model.io.timing.camera_clock`: the wait for the
+    next line removed; None with stamps). A segment needs 10 fixes,
     ``min_segment + 2 edge`` seconds and more grid samples than the Savitzky-Golay window;
     its first and last ``edge`` seconds are not usable.
 
@@ -684,10 +695,17 @@ def _ball_fixes(rec: Recording, nfix: NDArray[np.bool_], tg: FloatArray, cfg: Pr
         The fixes and their segments.
     ball_ok : ndarray of bool
         Grid samples inside a segment, edges dropped.
+    clock : CameraClock or None
+        How fixes without stamps were timed.
     """
     dt = cfg.dt
     n_edge = round(cfg.edge / dt)
-    tf = rec.fix_times() - latency0
+    clock = None
+    tf = rec.fix_times()
+    if rec.extra.get("ball_stamp") is None and rec.n > 1:
+        clock = camera_clock(tf, float(np.median(np.diff(rec.t))), cfg.max_gap)
+        tf = clock.times
+    tf = tf - latency0
     # segments between gaps
     gaps = np.nonzero(np.diff(tf) > cfg.max_gap)[0]
     bounds = np.concatenate([[0], gaps + 1, [tf.size]])
@@ -705,7 +723,7 @@ def _ball_fixes(rec: Recording, nfix: NDArray[np.bool_], tg: FloatArray, cfg: Pr
         ball_ok[i0 + n_edge:i1 - n_edge] = True
     fixes = _Fixes(tf=tf, x=rec.ball_x[nfix].astype(float), y=rec.ball_y[nfix].astype(float),
                    segs=segs, sgw=sgw, order=cfg.sg_order, antialias=cfg.antialias)
-    return fixes, ball_ok
+    return fixes, ball_ok, clock
 
 
 def stitch(preps: list[Prepared], gap: float = 0.6) -> Prepared:
