@@ -257,6 +257,11 @@ def _md_sensors(d: Diagnosis) -> list[str]:
         if lag is not None:
             L.append(f"| {Path(pr.name).name} | logged velocity's lag ({lag.get('how', '')}) | "
                      f"{lag['lag_s']:.4g} | {_num(lag.get('std_s'), '.2g')} (sd) | s |")
+        clock = pr.prep.info.get("camera_clock")
+        if clock is not None:
+            L.append(f"| {Path(pr.name).name} | camera clock: {clock['reason']} | "
+                     f"{_num(clock['residual_std_s'], '.3g')} (arrivals' scatter about it) | "
+                     f"{_num(clock['line_wait_std_s'], '.3g')} (a line's wait) | s |")
     return [*L, ""]
 
 
