@@ -100,7 +100,7 @@ def test_two_fixes_on_one_frame_step_refuse_the_clock() -> None:
     arr = np.sort(np.concatenate([_arrivals(te), _arrivals(te[[50, 200]]) + 1e-3]))
     clock = camera_clock(arr, LINE)
     assert not clock.used
-    assert "2 fix(es) a frame apart by less than half a period" in clock.reason
+    assert "2 fix(es) on one frame of it" in clock.reason
 
 
 def test_too_few_fixes_or_no_line_interval_change_nothing() -> None:
@@ -165,10 +165,14 @@ def _hold(x: np.ndarray) -> np.ndarray:
 
 @pytest.mark.skipif(not (DATA / "fin.txt").exists(), reason="the shipped NTNU logs")
 def test_the_ntnu_log_keeps_its_arrival_times() -> None:
-    """fin.txt's fixes arrive 5-10 ms off any steady clock (the tracker's own timing): the
-    preprocessing keeps the lines' times and says so."""
+    """fin.txt: a steady 164.98 Hz camera (no frame dropped in 21 s), but its fixes arrive
+    about 1.4 x a line's wait off that clock, and two on one frame (late deliveries): the
+    clock could be the worse timing, so the preprocessing keeps the lines' times and says
+    so, with the figures."""
     rec = read_recording(DATA / "fin.txt")
     clock = camera_clock(rec.fix_times(), float(np.median(np.diff(rec.t))))
     assert not clock.used
-    assert clock.residual_std > 10 * clock.wait_std
+    assert 1.0 / clock.period == pytest.approx(164.98, abs=0.05)
+    assert 1.0 < clock.residual_std / clock.wait_std < 2.0
+    assert "164.98 Hz" in clock.reason
     assert "no steady camera clock" in prepare(rec).info["ball"]
