@@ -53,7 +53,13 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from bfr_model.io.timing import CameraClock, camera_clock, corrected_velocity, velocity_lag
+from bfr_model.io.timing import (
+    CameraClock,
+    camera_clock,
+    corrected_velocity,
+    robust_sd,
+    velocity_lag,
+)
 from bfr_model.recording import Recording
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
@@ -340,7 +346,7 @@ def fix_noise(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float) -> f
         return float("nan")
     scale = np.sqrt(1.0 + np.sum(w ** 2, axis=1))[ok]
     e = np.concatenate([(v[k] - np.sum(w * v[nb], axis=1))[ok] / scale for v in (x, y)])
-    return float(1.4826 * np.median(np.abs(e - np.median(e))))
+    return robust_sd(e)
 
 
 def _cell_average_zoh(t: FloatArray, u: FloatArray, tg: FloatArray) -> FloatArray:

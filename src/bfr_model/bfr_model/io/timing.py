@@ -69,7 +69,7 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_filter
 
 __all__ = ["CameraClock", "VelocityLag", "camera_backlog_end", "camera_clock",
-           "corrected_velocity", "line_rate", "velocity_lag"]
+           "corrected_velocity", "line_rate", "robust_sd", "velocity_lag"]
 
 FloatArray = NDArray[np.float64]
 
@@ -370,7 +370,7 @@ def _clock_line(seg: FloatArray) -> tuple[FloatArray, FloatArray, float, float]:
             coef, *_ = np.linalg.lstsq(design[keep], part[keep], rcond=None)
             origin, period = float(coef[0]), float(coef[1])
             r = part - (origin + period * n)
-            keep = np.abs(r - np.median(r)) <= 4.0 * _robust_sd(r) + 1e-9
+            keep = np.abs(r - np.median(r)) <= 4.0 * robust_sd(r) + 1e-9
         if end == seg.size:
             break
         end = min(seg.size, 2 * end)
@@ -378,8 +378,8 @@ def _clock_line(seg: FloatArray) -> tuple[FloatArray, FloatArray, float, float]:
     return n, seg - (origin + period * n), period, origin
 
 
-def _robust_sd(x: FloatArray) -> float:
-    """1.4826 times the median absolute deviation."""
+def robust_sd(x: FloatArray) -> float:
+    """Robust standard deviation: 1.4826 times the median absolute deviation."""
     return float(1.4826 * np.median(np.abs(x - np.median(x))))
 
 
@@ -435,7 +435,7 @@ def camera_clock(arrivals: FloatArray, line_interval: float, max_gap: float = 0.
                            reason=f"no run of {min_fixes} fixes without a gap: arrival "
                                   "times kept")
     r_all = np.concatenate(resid)
-    inside = np.abs(r_all - np.median(r_all)) <= 4.0 * _robust_sd(r_all) + 1e-9
+    inside = np.abs(r_all - np.median(r_all)) <= 4.0 * robust_sd(r_all) + 1e-9
     scatter = float(np.std(r_all[inside]))  # late deliveries beyond 4 robust sd left out
     period = float(np.median(periods))
     if doubled == 0 and scatter <= tolerance * wait:
