@@ -321,7 +321,7 @@ def _null_screen_gains(prob: Problem, noises: list[PartNoise], sensors0: list[Fl
         parts = []
         for p, noise in zip(prob.parts, noises, strict=True):
             d = noise.draws[k]
-            parts.append(np.concatenate([d[r - 1] / p.sigma[r - 1] for r in p.rows]))
+            parts.append(np.concatenate([d[r - 1] * p.row_weight(r) for r in p.rows]))
         es.append(np.concatenate(parts))
     gains: dict[str, list[list[float]]] = {}
     for name in prob.candidates:
