@@ -160,8 +160,11 @@ def test_composed_loop_runs_both_nodes_in_one_pinned_process(
                                           "-p", "input.frame_timeout:=2.0"])
     assert ros_harness.spin_until(lambda: loop.output().count("composed with camera, "
                                                               "controller") == 2, timeout=60)
+    # discovery is asynchronous: the process may print before the harness has seen its nodes
+    both = {"camera", "controller"}
+    ros_harness.spin_until(lambda: both <= set(ros_harness.node.get_node_names()), timeout=30)
     names = set(ros_harness.node.get_node_names())
-    assert {"camera", "controller"} <= names, names
+    assert both <= names, names
     out = loop.output()
     assert f"CPU {cpu} only (" in out
     assert _thread_cpus(loop.process.pid) == {(cpu,)}
