@@ -1,0 +1,82 @@
+"""Tests of the diagnosis's weights (:meth:`bfr_diagnose.identify.Problem.reweight`).
+
+Each row is divided by the larger of its null noise and its residual's robust scale, and
+each sample gets Huber's weight ``min(1, k / z)``, ``z = |r| / sigma``. The tests: the
+weights against their closed form on a recording's own residual; and the reason for them,
+on truth the diagnosis did not make: limits case 215 (seed 1), a recording of the
+force-based contact model (free ball, compliant contact, friction-limited rolling) with a
+1.27 mN m dry friction in the joint. The rigid model misses that ball row with heavy tails;
+with a robust scale under the plain square those tails held 37 times the frame row's cost
+and the friction, fitted to 0.3 %, gained 1.5 % of the held-out cost (threshold 2 %). With
+Huber's weights it gains 16 %, the most of any candidate.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from bfr_diagnose.api import DiagnoseOptions, diagnose_recordings
+from bfr_diagnose.identify import HUBER_K, Problem
+from bfr_diagnose.limits.cases import draw_case
+from bfr_diagnose.limits.runner import _model_recorder
+from bfr_model.params import load_params
+
+from bfr_diagnose import api
+
+
+@pytest.fixture(scope="module")
+def case_215() -> tuple:
+    """The case's recording as read back from its rig log, the nominal parameters, truth."""
+    base = load_params()
+    case = draw_case(1, 215, base)
+    assert case.generator == "contact" and set(case.changes) == {"joint.coulomb_friction"}
+    runs, loop = _model_recorder(case, base, 10.0)
+    assert loop["ball_rolling"]
+    return runs, base, case.changes["joint.coulomb_friction"]
+
+
+def test_weights_follow_their_closed_form(case_215: tuple) -> None:
+    """After stage 0: sigma = max(null, 1.4826 median |r| on training), w = sqrt(min(1, k/z))."""
+    runs, base, _ = case_215
+    opts = DiagnoseOptions()
+    parts, pieces, _ = api._parts([("case 215", runs)], opts, lambda _s: None)
+    prob = Problem(parts, base)
+    _, sensors0, _ = api._calibrate(prob, pieces, opts, lambda _s: None)
+    p = prob.parts[0]
+    assert p.huber is not None and p.huber.shape == (3, p.n)
+    x_all = prob.part_scaled(0, [], sensors0[0])
+    prob.reweight([], sensors0)  # the same residual again: weights at their fixed point
+    for j, r in enumerate(p.rows):
+        x = x_all[j]
+        train = x[p.train][np.isfinite(x[p.train])]
+        sigma = max(p.sigma_null[r - 1], 1.4826 * np.median(np.abs(train)))
+        assert p.sigma[r - 1] == pytest.approx(sigma, rel=1e-12)
+        z = np.abs(x) / sigma
+        ok = np.isfinite(z)
+        want = np.sqrt(np.minimum(1.0, HUBER_K / np.maximum(z[ok], 1e-300)))
+        np.testing.assert_allclose(p.huber[r - 1][ok], want, rtol=1e-12)
+        assert np.all(p.huber[r - 1][~ok] == 1.0)
+        # the weighted row is the row times its weights over sigma
+        w = prob.part_weighted(0, [], sensors0[0]).reshape(len(p.rows), p.n)[j]
+        np.testing.assert_allclose(w[ok], x[ok] * p.huber[r - 1][ok] / sigma, rtol=1e-12)
+    # a heavy-tailed row: some of its samples are beyond k sigma and weighted down
+    assert min(float(np.min(p.huber[r - 1])) for r in p.rows) < 0.5
+
+
+def test_contact_truth_dry_friction_passes_the_held_out_test(case_215: tuple) -> None:
+    """Limits case 215: the dry friction's held-out gain clears its threshold, at its size.
+
+    With a robust scale under the plain square its held-out gain was 0.015 against 0.020
+    (and -0.008 in another run of the case). It is still not selected: its dBIC is about
+    -1.5 against the required -6, because the training blocks hold the ball row's tails
+    (docs/notes/issue-14.md, seventh session); this test pins what the weights mend.
+    """
+    runs, base, t_c = case_215
+    d = diagnose_recordings([("case 215", runs)], base, DiagnoseOptions())
+    first = {r["effect"]: r for r in d.summary["stages"][0]["candidates"]}
+    cf = first["joint_coulomb_friction"]
+    assert cf["heldout_gain"] > 2.0 * cf["threshold"], cf
+    assert cf["values"]["T_c"] == pytest.approx(t_c, rel=0.02)
+    # nothing else stands in for it: no other candidate gains as much
+    assert all(r["heldout_gain"] < cf["heldout_gain"] for n, r in first.items()
+               if n != "joint_coulomb_friction")
