@@ -373,6 +373,8 @@ class Problem:
                 x = x[np.isfinite(x)]
                 if x.size < 10:
                     continue
+                # about zero, not about the median (timing.robust_sd): a row's constant
+                # misfit is misfit, and belongs in its scale
                 level = 1.4826 * float(np.median(np.abs(x)))
                 p.sigma[r - 1] = max(float(p.sigma_null[r - 1]), level)
                 with np.errstate(divide="ignore", invalid="ignore"):
