@@ -311,7 +311,9 @@ def _calibrate(prob: Problem, pieces: list[list[Piece]], opts: DiagnoseOptions, 
     prob.set_weights([n.sigma for n in noises])
     for p, n in zip(prob.parts, noises, strict=True):
         say(f"null of {p.name}: {len(n.draws)} noise injections (camera "
-            f"{n.levels['camera'] * 1e3:.3f} mm, theta {n.levels['theta']:.2g} rad, "
+            f"{n.levels['camera_across'] * 1e3:.3f} mm across the ball's path, "
+            f"{n.levels['camera_along'] * 1e3:.3f} mm along it, "
+            f"theta {n.levels['theta']:.2g} rad, "
             f"theta_dot {n.levels['theta_dot']:.2g} rad/s): row noise "
             + ", ".join(f"{ROW_NAMES[r]} {n.sigma[r - 1]:.3g} {ROW_UNITS[r]}" for r in p.rows))
     say("stage 0: each recording's sensor model with the nominal physics")

@@ -2,7 +2,8 @@
 
 **Noise injection into each recording itself** (:func:`part_noise`). The sensor noise of the
 recording is estimated in preprocessing (camera: the fixes against the cubic through their
-neighbours, :func:`~bfr_diagnose.preprocess.fix_noise`; encoder: its resolution,
+neighbours, across the ball's path and along it apart,
+:func:`~bfr_diagnose.preprocess.fix_noise_path`; encoder: its resolution,
 quantisation ``q / sqrt(12)``; a logged velocity: its high-frequency scatter). Fresh noise of
 exactly that size is added to the raw measurements (each camera fix, theta, the logged
 velocity), the noisy copy goes through the same preprocessing (the same pieces, the same
@@ -157,7 +158,13 @@ def _levels(prep: Any) -> dict[str, float]:
     th = max(res / math.sqrt(12.0), float(prep.noise.get("theta", 0.0)) if
              not prep.info.get("theta_coarse") else 0.0)
     cam = float(prep.noise.get("camera", float("nan")))
-    return {"camera": cam if math.isfinite(cam) else 0.0, "theta": th,
+    cam = cam if math.isfinite(cam) else 0.0
+    # across and along the ball's path, each at its own level (preprocess.fix_noise_path);
+    # the per-axis level where they are not estimated
+    across = float(prep.noise.get("camera_across", float("nan")))
+    along = float(prep.noise.get("camera_along", float("nan")))
+    return {"camera": cam, "camera_across": across if math.isfinite(across) else cam,
+            "camera_along": along if math.isfinite(along) else cam, "theta": th,
             "theta_dot": (float(prep.noise.get("theta_dot", 0.0))
                           if prep.info.get("theta_coarse") else 0.0)}
 
@@ -166,19 +173,27 @@ def noisy_copy(rec: Recording, levels: dict[str, float], rng: np.random.Generato
                resolution: float | None = None) -> Recording:
     """``rec`` with fresh sensor noise of the given levels added (module docstring).
 
-    Camera: independent Gaussian noise per fix and axis [m], held with the fix. theta:
+    Camera: independent Gaussian noise per fix [m], held with the fix: across the ball's path
+    (normal to the step between the neighbouring fixes) of ``levels["camera_across"]`` and
+    along it of ``levels["camera_along"]`` (each ``levels["camera"]`` when absent). theta:
     Gaussian of ``levels["theta"]`` [rad]. Logged velocity: Gaussian of
     ``levels["theta_dot"]`` [rad/s] per sample. ``resolution`` [rad] is kept as the copy's
     ``meta["theta_resolution"]`` so that preprocessing treats it like the original.
     """
     n = rec.n
     bx, by = rec.ball_x.copy(), rec.ball_y.copy()
-    if levels.get("camera", 0.0) > 0.0 and rec.ball_valid.any():
+    cam = levels.get("camera", 0.0)
+    s_across = levels.get("camera_across", cam)
+    s_along = levels.get("camera_along", cam)
+    if max(s_across, s_along) > 0.0 and rec.ball_valid.any():
         new = rec.new_fix_mask()
         hold = np.cumsum(new) - 1
         nf = int(new.sum())
-        ex = levels["camera"] * rng.standard_normal(nf)
-        ey = levels["camera"] * rng.standard_normal(nf)
+        ux, uy = _path_direction(rec.ball_x[new], rec.ball_y[new])
+        a = s_across * rng.standard_normal(nf)
+        b = s_along * rng.standard_normal(nf)
+        ex = b * ux - a * uy
+        ey = b * uy + a * ux
         v = rec.ball_valid & (hold >= 0)
         bx[v] += ex[hold[v]]
         by[v] += ey[hold[v]]
@@ -190,6 +205,20 @@ def noisy_copy(rec: Recording, levels: dict[str, float], rng: np.random.Generato
     return Recording(t=rec.t, theta=theta, theta_dot=thd, torque=rec.torque, ball_x=bx,
                      ball_y=by, ball_valid=rec.ball_valid, phi=rec.phi, extra=dict(rec.extra),
                      meta=meta)
+
+
+def _path_direction(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Unit vectors along the ball's path at each fix (the step between its neighbours).
+
+    ``(1, 0)`` where the ball does not move or there is a single fix.
+    """
+    if x.size < 2:
+        return np.ones(x.size), np.zeros(x.size)
+    dx, dy = np.gradient(x), np.gradient(y)
+    v = np.hypot(dx, dy)
+    on = v > 0
+    v = np.where(on, v, 1.0)
+    return np.where(on, dx / v, 1.0), np.where(on, dy / v, 0.0)
 
 
 def _rows(res: Residual) -> FloatArray:

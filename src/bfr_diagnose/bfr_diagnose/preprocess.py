@@ -32,8 +32,9 @@ Steps (docs/diagnosis.md):
    model's curve (done in :mod:`~bfr_diagnose.residual`, since the curve is a fitted
    quantity). Camera corrections (:class:`SensorCorrection`) re-smooth the fixes exactly
    (offset) or shift them in time (latency).
-5. Noise: camera noise from the fixes themselves (:func:`fix_noise`), encoder resolution,
-   high-frequency scatter of a logged velocity; used by the noise-only null.
+5. Noise: camera noise from the fixes themselves (:func:`fix_noise`, and across and along
+   the ball's path apart, :func:`fix_noise_path`), encoder resolution, high-frequency scatter
+   of a logged velocity; used by the noise-only null.
 6. Segments: runs of valid ball fixes without gaps longer than ``max_gap``; the first and
    last ``edge`` seconds of each segment are dropped. Recordings without usable ball fixes
    (or with ``--ball no``) give one frame-only segment (row 1 with the ball terms off).
@@ -67,7 +68,8 @@ from scipy.signal import savgol_filter
 
 from bfr_diagnose import DiagnoseError
 
-__all__ = ["Piece", "PrepConfig", "Prepared", "SensorCorrection", "fix_noise", "frame_held",
+__all__ = ["Piece", "PrepConfig", "Prepared", "SensorCorrection", "fix_noise", "fix_noise_path",
+           "frame_held",
            "plan_parts", "prepare", "prepare_pieces", "prepare_runs", "segments_from_mask",
            "split_pieces", "stitch"]
 
@@ -328,9 +330,41 @@ def fix_noise(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float) -> f
     leaks in only at fourth order (``~ x^(4) h^4``, far below the noise at 165-200 Hz).
     Robust (median absolute deviation) over both axes and all fixes with no gap nearby.
     """
+    errs = _fix_prediction_errors(tf, x, y, max_gap)
+    return float("nan") if errs is None else robust_sd(np.concatenate(errs[:2]))
+
+
+def fix_noise_path(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float
+                    ) -> tuple[float, float]:
+    """The camera noise [m] across and along the ball's path: (across, along).
+
+    The prediction errors of :func:`fix_noise` projected on the normal of the fix's velocity
+    (from its neighbours) and on the velocity. An error in a fix's time (a fix logged at the
+    next line of a log, not at its exposure) moves it along its path, by its speed times the
+    error, and not across it. The null injects each component at its own level
+    (:func:`bfr_diagnose.null.noisy_copy`). (NaN, NaN) when not estimated.
+    """
+    errs = _fix_prediction_errors(tf, x, y, max_gap)
+    if errs is None:
+        return float("nan"), float("nan")
+    ex, ey, vx, vy = errs
+    v = np.hypot(vx, vy)
+    ok = v > 0
+    ux, uy = vx[ok] / v[ok], vy[ok] / v[ok]
+    return (robust_sd(ey[ok] * ux - ex[ok] * uy), robust_sd(ex[ok] * ux + ey[ok] * uy))
+
+
+def _fix_prediction_errors(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float
+                           ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
+    """Normalised prediction errors of each fix from its neighbours (:func:`fix_noise`).
+
+    ``(ex, ey, dx, dy)`` at the fixes with no gap nearby (the errors over
+    ``sqrt(1 + sum w^2)``; the step between the outer neighbours, the path's direction);
+    None when fewer than 10.
+    """
     m = tf.size
     if m < 12:
-        return float("nan")
+        return None
     k = np.arange(2, m - 2)
     nb = np.stack([k - 2, k - 1, k + 1, k + 2], axis=1)
     tn = tf[nb]
@@ -343,10 +377,10 @@ def fix_noise(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float) -> f
     win = np.stack([k - 2, k - 1, k, k + 1, k + 2], axis=1)
     ok = np.all(np.diff(tf[win], axis=1) < max_gap, axis=1)
     if ok.sum() < 10:
-        return float("nan")
+        return None
     scale = np.sqrt(1.0 + np.sum(w ** 2, axis=1))[ok]
-    e = np.concatenate([(v[k] - np.sum(w * v[nb], axis=1))[ok] / scale for v in (x, y)])
-    return robust_sd(e)
+    ex, ey = ((v[k] - np.sum(w * v[nb], axis=1))[ok] / scale for v in (x, y))
+    return ex, ey, (x[k + 2] - x[k - 2])[ok], (y[k + 2] - y[k - 2])[ok]
 
 
 def _cell_average_zoh(t: FloatArray, u: FloatArray, tg: FloatArray) -> FloatArray:
@@ -545,7 +579,8 @@ def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0
                     psi_w_dot=ball.psi_w_dot, rho=ball.rho, ball_xy=ball.xy, ball_ok=ball.ok,
                     frame_ok=frame_ok, has_ball=ball.has_ball, frame_held=bool(held),
                     latency0=latency0,
-                    noise={"camera": ball.noise, "theta": frame.noise,
+                    noise={"camera": ball.noise, "camera_across": ball.noise_path[0],
+                           "camera_along": ball.noise_path[1], "theta": frame.noise,
                            "theta_dot": noise_thd}, info=info, fixes=ball.fixes)
 
 
@@ -634,6 +669,7 @@ class _Ball:
     xy: FloatArray | None          # (4, n): smoothed x, y [m], x_dot, y_dot [m/s]
     ok: NDArray[np.bool_]          # grid samples inside a usable segment (edges dropped)
     noise: float                   # [m] camera noise per axis (NaN if not estimated)
+    noise_path: tuple[float, float] = (float("nan"), float("nan"))  # [m] across, along
     fixes: _Fixes | None           # the raw fixes (only when the ball rows apply)
     note: str                      # what was found (for the report)
     clock: CameraClock | None = None  # how the fixes were timed (no stamps: line arrivals)
@@ -666,6 +702,7 @@ def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _
     rho = np.hypot(bxy[0], bxy[1])
     psi_wd = (bxy[1] * bxy[2] - bxy[0] * bxy[3]) / (rho * rho)
     noise_cam = fix_noise(fixes.tf, fixes.x, fixes.y, cfg.max_gap)
+    noise_path = fix_noise_path(fixes.tf, fixes.x, fixes.y, cfg.max_gap)
     if not ball_ok.any():
         if cfg.ball == "yes":
             raise DiagnoseError("no usable ball segment (need "
@@ -678,7 +715,7 @@ def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _
               f"camera clock {1.0 / clock.period:.2f} Hz, fixes placed on it" if clock.used
               else "fixes at their lines' times (no steady camera clock)")
     return _Ball(has_ball=True, psi_w=psi_w, psi_w_dot=psi_wd, rho=rho, xy=bxy, ok=ball_ok,
-                 noise=noise_cam, fixes=fixes,
+                 noise=noise_cam, noise_path=noise_path, fixes=fixes,
                  note=(f"{len(segments_from_mask(ball_ok))} ball segment(s), "
                        f"{ball_ok.mean() * 100:.0f} % of the run; {int(nfix.sum())} fixes "
                        f"({rec.camera_fix_rate():.0f} per second); {timing}"), clock=clock)
