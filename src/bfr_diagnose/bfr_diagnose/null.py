@@ -91,7 +91,8 @@ class PartNoise:
     tau : float
         Autocorrelation time of the noise residual [samples] (median over the draws).
     levels : dict
-        Noise levels injected (camera [m], theta [rad], theta_dot [rad/s]).
+        Noise levels injected (camera [m] per axis, camera_across and camera_along [m]
+        across and along the ball's path, theta [rad], theta_dot [rad/s]).
     processing : bool
         Whether the processing term was added.
     """

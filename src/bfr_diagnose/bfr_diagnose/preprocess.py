@@ -229,7 +229,9 @@ class Prepared:
     latency0 : float
         Camera latency assumed when placing the fixes [s].
     noise : dict
-        Estimated raw noise levels: ``camera`` [m], ``theta`` [rad].
+        Estimated raw noise levels: ``camera`` [m] per axis, ``camera_across`` and
+        ``camera_along`` [m] across and along the ball's path (:func:`fix_noise_path`),
+        ``theta`` [rad], ``theta_dot`` [rad/s].
     info : dict
         What was done (for the report).
     """
@@ -342,7 +344,13 @@ def fix_noise_path(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float
     (from its neighbours) and on the velocity. An error in a fix's time (a fix logged at the
     next line of a log, not at its exposure) moves it along its path, by its speed times the
     error, and not across it. The null injects each component at its own level
-    (:func:`bfr_diagnose.null.noisy_copy`). (NaN, NaN) when not estimated.
+    (:func:`bfr_diagnose.null.noisy_copy`). (NaN, NaN) when not estimated: fewer than 10
+    fixes with no gap nearby whose neighbours are apart (a ball at rest has no path).
+
+    One level along the path for the whole recording: where the ball is slow its timing
+    error is smaller than that (a resting ball's fixes are apart by noise alone, and the
+    null then gives it the along level in every direction); the ball rolls in the
+    recordings this is made for.
     """
     errs = _fix_prediction_errors(tf, x, y, max_gap)
     if errs is None:
@@ -350,6 +358,8 @@ def fix_noise_path(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float
     ex, ey, vx, vy = errs
     v = np.hypot(vx, vy)
     ok = v > 0
+    if ok.sum() < 10:
+        return float("nan"), float("nan")
     ux, uy = vx[ok] / v[ok], vy[ok] / v[ok]
     return (robust_sd(ey[ok] * ux - ex[ok] * uy), robust_sd(ex[ok] * ux + ey[ok] * uy))
 
