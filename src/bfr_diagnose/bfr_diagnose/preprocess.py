@@ -69,9 +69,8 @@ from scipy.signal import savgol_filter
 from bfr_diagnose import DiagnoseError
 
 __all__ = ["Piece", "PrepConfig", "Prepared", "SensorCorrection", "fix_noise", "fix_noise_path",
-           "frame_held",
-           "plan_parts", "prepare", "prepare_pieces", "prepare_runs", "segments_from_mask",
-           "split_pieces", "stitch"]
+           "frame_held", "plan_parts", "prepare", "prepare_pieces", "prepare_runs",
+           "segments_from_mask", "split_pieces", "stitch"]
 
 FloatArray = NDArray[np.float64]
 
@@ -332,8 +331,7 @@ def fix_noise(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float) -> f
     leaks in only at fourth order (``~ x^(4) h^4``, far below the noise at 165-200 Hz).
     Robust (median absolute deviation) over both axes and all fixes with no gap nearby.
     """
-    errs = _fix_prediction_errors(tf, x, y, max_gap)
-    return float("nan") if errs is None else robust_sd(np.concatenate(errs[:2]))
+    return _per_axis(_fix_prediction_errors(tf, x, y, max_gap))
 
 
 def fix_noise_path(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float
@@ -352,7 +350,19 @@ def fix_noise_path(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float
     null then gives it the along level in every direction); the ball rolls in the
     recordings this is made for.
     """
-    errs = _fix_prediction_errors(tf, x, y, max_gap)
+    return _across_along(_fix_prediction_errors(tf, x, y, max_gap))
+
+
+_Errors = tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None
+
+
+def _per_axis(errs: _Errors) -> float:
+    """:func:`fix_noise` from the prediction errors (NaN when there are none)."""
+    return float("nan") if errs is None else robust_sd(np.concatenate(errs[:2]))
+
+
+def _across_along(errs: _Errors) -> tuple[float, float]:
+    """:func:`fix_noise_path` from the prediction errors ((NaN, NaN) when not estimated)."""
     if errs is None:
         return float("nan"), float("nan")
     ex, ey, vx, vy = errs
@@ -365,7 +375,7 @@ def fix_noise_path(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float
 
 
 def _fix_prediction_errors(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap: float
-                           ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None:
+                           ) -> _Errors:
     """Normalised prediction errors of each fix from its neighbours (:func:`fix_noise`).
 
     ``(ex, ey, dx, dy)`` at the fixes with no gap nearby (the errors over
@@ -711,8 +721,8 @@ def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _
     psi_w = _world_angle(bxy[0], bxy[1])
     rho = np.hypot(bxy[0], bxy[1])
     psi_wd = (bxy[1] * bxy[2] - bxy[0] * bxy[3]) / (rho * rho)
-    noise_cam = fix_noise(fixes.tf, fixes.x, fixes.y, cfg.max_gap)
-    noise_path = fix_noise_path(fixes.tf, fixes.x, fixes.y, cfg.max_gap)
+    errs = _fix_prediction_errors(fixes.tf, fixes.x, fixes.y, cfg.max_gap)  # once, for both
+    noise_cam, noise_path = _per_axis(errs), _across_along(errs)
     if not ball_ok.any():
         if cfg.ball == "yes":
             raise DiagnoseError("no usable ball segment (need "
