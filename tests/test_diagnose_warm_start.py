@@ -1,0 +1,75 @@
+"""The equation error does not depend on what was evaluated before it.
+
+:meth:`bfr_diagnose.residual.ResidualEvaluator.evaluate` solves the contact angle of every
+sample by Newton's method from the last evaluation's solution (a warm start: a fit's next
+evaluation is a small step from the last one), and :class:`bfr_diagnose.identify.Problem`
+keeps the physics of recent effect values. Both are speed-ups only: an evaluator that has
+seen other parameter sets, sensor models and a fitted contour first must give the same
+rows as a fresh one, to the Newton tolerance (1e-11 rad of the contact angle).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from bfr_diagnose.effects import EFFECTS
+from bfr_diagnose.identify import Part, Problem
+from bfr_diagnose.preprocess import SensorCorrection, prepare
+from bfr_diagnose.residual import ResidualEvaluator
+from bfr_diagnose.synth import SynthConfig, stabilised_recording
+from bfr_model.params import RigParams
+
+
+@pytest.fixture(scope="module")
+def prep():  # noqa: ANN201 - a Prepared
+    base = RigParams()
+    rec = stabilised_recording(base, base, SynthConfig(duration=4.0), np.random.default_rng(3))
+    assert rec.meta["ball_rolled"]
+    return prepare(rec)
+
+
+def _rows(ev: ResidualEvaluator, params: RigParams, sensor: SensorCorrection) -> np.ndarray:
+    return np.vstack(ev.evaluate(params, sensor).rows[:3])
+
+
+def test_rows_do_not_depend_on_the_evaluations_before(prep) -> None:  # noqa: ANN001
+    base = RigParams()
+    # a contour 2 mm off in cos 4 phi and 1.5 mm in cos 6 phi (fin's order of size), a
+    # latency and a camera offset beside it
+    shaped = base.replace(**{"frame.contour.harmonic_orders": [4.0, 6.0],
+                             "frame.contour.harmonic_cos": [-2e-3, 1.5e-3],
+                             "frame.contour.harmonic_sin": [0.0, 0.0]})
+    sensor = SensorCorrection(latency=2e-3, offset_x=1e-3, scale=1.01)
+    fresh = _rows(ResidualEvaluator(prep), shaped, sensor)
+    ev = ResidualEvaluator(prep)
+    _rows(ev, base, SensorCorrection())               # history: the nominal model first,
+    _rows(ev, shaped, SensorCorrection(latency=-5e-3))  # then another sensor model
+    warm = _rows(ev, shaped, sensor)
+    ok = np.isfinite(fresh)
+    assert ok.sum() > 100 and np.array_equal(ok, np.isfinite(warm))
+    for r in range(3):
+        scale = np.max(np.abs(fresh[r][ok[r]]))
+        assert np.max(np.abs(warm[r][ok[r]] - fresh[r][ok[r]])) <= 1e-8 * scale
+    # and the contour does move the contact angle (by up to 6.7 mrad here): the evaluator's
+    # Newton starts from another solution than the one it must find
+    phi0 = ResidualEvaluator(prep).evaluate(base).phi
+    phi1 = ResidualEvaluator(prep).evaluate(shaped).phi
+    assert np.nanmax(np.abs(phi1 - phi0)) > 0.005
+
+
+def test_kept_physics_is_the_physics_of_the_values(prep) -> None:  # noqa: ANN001
+    """The problem's kept parameter sets: the same values give the same rows, other values
+    other rows (the key is the values, not the effect's name)."""
+    base = RigParams()
+    part = Part.of("rec", ResidualEvaluator(prep), 0.5, ("latency", "theta_zero"))
+    prob = Problem([part], base)
+    shape = EFFECTS["frame_contour"]
+    s0 = np.zeros(len(part.sensor_names))
+    a = prob.part_weighted(0, [(shape, np.array([0.1105, 0.040]))], s0)
+    b = prob.part_weighted(0, [(shape, np.array([0.1085, 0.040]))], s0)
+    a2 = prob.part_weighted(0, [(shape, np.array([0.1105, 0.040]))], s0)
+    # the same to the Newton tolerance (a2's contact angles start from b's, a's from psi)
+    ok = np.isfinite(a)
+    assert np.array_equal(ok, np.isfinite(a2))
+    assert np.max(np.abs(a2[ok] - a[ok])) <= 1e-8 * np.max(np.abs(a[ok]))
+    assert np.max(np.abs(b[ok] - a[ok])) > 1e-3 * np.max(np.abs(a[ok]))
