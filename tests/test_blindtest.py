@@ -49,11 +49,12 @@ def test_small_draws_keep_a_clean_control() -> None:
 def _result(kind: str, truth: list[str], found: list[str], err: float = 0.05,
             impr: float = 3.0) -> dict:
     st = {"writer": "rig_log", "camera_latency": 0.01, "log_rate": 500.0,
-          "torque_delay": 1e-3}
+          "torque_delay": 1e-3, "velocity_lag": 6e-3}
     return {"kind": kind, "truth": truth, "found": found, "exact": set(truth) == set(found),
             "param_errors": {e: err for e in truth if e in found},
             "improvement_located": impr, "improvement_whole": impr, "sensors_true": st,
-            "sensors_found": {"camera_latency": 0.0115, "torque_delay": 1.2e-3}}
+            "sensors_found": {"camera_latency": 0.0115, "torque_delay": 1.2e-3,
+                              "velocity_lag": 6.1e-3}}
 
 
 def test_score_counts_what_the_table_says() -> None:
@@ -77,6 +78,12 @@ def test_score_counts_what_the_table_says() -> None:
     # a rig log times a fix by its first line: the latency plus half a line is expected
     assert sc["sensor_error_median"]["camera_latency"] == pytest.approx(0.0005, abs=1e-9)
     assert sc["sensor_error_median"]["torque_delay"] == pytest.approx(2e-4, abs=1e-9)
+    # the velocity's lag: the filter's constant as drawn (the logger is exactly that late)
+    assert sc["sensor_error_median"]["velocity_lag"] == pytest.approx(1e-4, abs=1e-9)
+    # a record without the drawn lag (an older table) is not scored on it
+    old = _result("single", ["ball_mass"], ["ball_mass"])
+    del old["sensors_true"]["velocity_lag"]
+    assert bt.score([old])["sensor_error_median"]["velocity_lag"] is None
     assert not bt.targets_met(sc)
 
 

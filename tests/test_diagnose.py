@@ -145,8 +145,12 @@ def test_clean_control_with_a_strange_logger_through_rig_log_text(tmp_path: Path
     assert sens["latency"] == pytest.approx(0.012 + 0.5 / 300.0, abs=1.5e-3)
     assert sens["torque_delay"] == pytest.approx(0.0015, abs=3e-4)
     assert sens["scale"] == pytest.approx(1.01, abs=5e-3)
+    # the filter's time constant is its lag; 1 / (1 + tau s) = e^(-tau s) (1 + tau^2 s^2 / 2
+    # + ...), so its second-order term is -tau^2 / 2 (the logger's filter is exact for a
+    # linearly interpolated rate: synth._lagged)
     lag = s["recordings"][0]["preprocessing"]["velocity_lag"]
-    assert lag["identified"] and 0.003 < lag["lag_s"] < 0.008
+    assert lag["identified"] and lag["lag_s"] == pytest.approx(0.007, abs=3e-4)
+    assert 0.7 < lag["c2_s2"] / (-0.5 * 0.007 ** 2) < 1.3
 
 
 def test_pair_found_as_two() -> None:
@@ -425,3 +429,5 @@ def test_real_friction_runs_both_directions_one_rig() -> None:
     # one speed per run: each run alone cannot split T_c from tau_0, and says so
     per = s["between_recordings"]["per_recording"]
     assert per and all(not p["used"] and p["degenerate"] for p in per)
+    # ... and so has no interval (the curvature at a degenerate optimum is no spread)
+    assert all(p["ci95"] == [None, None] for p in per)

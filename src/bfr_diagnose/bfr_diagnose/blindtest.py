@@ -388,12 +388,14 @@ def expected_sensors(st: dict[str, Any]) -> dict[str, float | None]:
 
     Camera latency: a rig log times a fix by the first line after its delivery, so the log
     sees the camera's latency plus half a line on average; a bag stamps it at its exposure
-    (latency 0). Torque timing: as drawn. The velocity's lag: a first-order filter's time
-    constant, none for an exact derivative (its second-order term is not scored).
+    (latency 0). Torque timing: as drawn. The velocity's lag: the first-order filter's time
+    constant as drawn (the synthetic logger's filter is exactly that late,
+    :func:`bfr_diagnose.synth.log_recording`); scored where the diagnosis uses the logged
+    velocity (a coarse encoder), its second-order term is not scored.
     """
     lat = 0.0 if st["writer"] == "bag" else st["camera_latency"] + 0.5 / st["log_rate"]
     return {"camera_latency": lat, "torque_delay": st["torque_delay"],
-            "velocity_lag": None}
+            "velocity_lag": st.get("velocity_lag")}
 
 
 def score(results: list[dict[str, Any]]) -> dict[str, Any]:
