@@ -66,7 +66,7 @@ from numpy.typing import NDArray
 from bfr_diagnose import DiagnoseError
 from bfr_diagnose.effects import EFFECTS
 from bfr_diagnose.identify import LinearScreen, Part, Problem, autocorr_time
-from bfr_diagnose.preprocess import Piece, PrepConfig, prepare_pieces
+from bfr_diagnose.preprocess import Piece, PrepConfig, path_steps, prepare_pieces
 from bfr_diagnose.residual import Residual, ResidualConfig, ResidualEvaluator
 
 __all__ = ["NullCalibration", "PartNoise", "noisy_copy", "null_gains", "null_part_gains",
@@ -175,7 +175,8 @@ def noisy_copy(rec: Recording, levels: dict[str, float], rng: np.random.Generato
     """``rec`` with fresh sensor noise of the given levels added (module docstring).
 
     Camera: independent Gaussian noise per fix [m], held with the fix: across the ball's path
-    (normal to the step between the neighbouring fixes) of ``levels["camera_across"]`` and
+    (normal to the step between the fix's outer neighbours, the estimate's stencil,
+    :func:`~bfr_diagnose.preprocess.path_steps`) of ``levels["camera_across"]`` and
     along it of ``levels["camera_along"]`` (each ``levels["camera"]`` when absent). theta:
     Gaussian of ``levels["theta"]`` [rad]. Logged velocity: Gaussian of
     ``levels["theta_dot"]`` [rad/s] per sample. ``resolution`` [rad] is kept as the copy's
@@ -209,13 +210,11 @@ def noisy_copy(rec: Recording, levels: dict[str, float], rng: np.random.Generato
 
 
 def _path_direction(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
-    """Unit vectors along the ball's path at each fix (the step between its neighbours).
+    """Unit vectors along the ball's path at each fix (:func:`~.preprocess.path_steps`).
 
     ``(1, 0)`` where the ball does not move or there is a single fix.
     """
-    if x.size < 2:
-        return np.ones(x.size), np.zeros(x.size)
-    dx, dy = np.gradient(x), np.gradient(y)
+    dx, dy = path_steps(x, y)
     v = np.hypot(dx, dy)
     on = v > 0
     v = np.where(on, v, 1.0)

@@ -69,8 +69,8 @@ from scipy.signal import savgol_filter
 from bfr_diagnose import DiagnoseError
 
 __all__ = ["Piece", "PrepConfig", "Prepared", "SensorCorrection", "fix_noise", "fix_noise_path",
-           "frame_held", "plan_parts", "prepare", "prepare_pieces", "prepare_runs",
-           "segments_from_mask", "split_pieces", "stitch"]
+           "frame_held", "path_steps", "plan_parts", "prepare", "prepare_pieces",
+           "prepare_runs", "segments_from_mask", "split_pieces", "stitch"]
 
 FloatArray = NDArray[np.float64]
 
@@ -400,7 +400,24 @@ def _fix_prediction_errors(tf: FloatArray, x: FloatArray, y: FloatArray, max_gap
         return None
     scale = np.sqrt(1.0 + np.sum(w ** 2, axis=1))[ok]
     ex, ey = ((v[k] - np.sum(w * v[nb], axis=1))[ok] / scale for v in (x, y))
-    return ex, ey, (x[k + 2] - x[k - 2])[ok], (y[k + 2] - y[k - 2])[ok]
+    dx, dy = path_steps(x, y)
+    return ex, ey, dx[k][ok], dy[k][ok]
+
+
+def path_steps(x: FloatArray, y: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """The ball's path direction at each fix: the step between its outer neighbours [m].
+
+    ``(x[k + 2] - x[k - 2], y[k + 2] - y[k - 2])``, the span clipped to the fixes at the
+    ends. The one stencil of the path's direction: the camera-noise estimate
+    (:func:`fix_noise_path`) projects on it and the null
+    (:func:`bfr_diagnose.null.noisy_copy`) injects along it, so both split a fix's error
+    into the same two directions.
+    """
+    m = x.size
+    k = np.arange(m)
+    hi = np.minimum(k + 2, m - 1)
+    lo = np.maximum(k - 2, 0)
+    return x[hi] - x[lo], y[hi] - y[lo]
 
 
 def _cell_average_zoh(t: FloatArray, u: FloatArray, tg: FloatArray) -> FloatArray:
