@@ -10,13 +10,16 @@ value.
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
+from bfr_model.io.rig_conventions import default_data_dir
 
 __all__ = [
     "BenchOptions",
@@ -26,6 +29,7 @@ __all__ = [
     "Progress",
     "Section",
     "fmt_value",
+    "rig_data_dir",
     "timed",
 ]
 
@@ -168,6 +172,16 @@ class Figure:
             "note": self.note,
             **({"extra": self.extra} if self.extra else {}),
         }
+
+
+def rig_data_dir() -> Path:
+    """The real rig's logs: ``$BFR_RIG_DATA``, else the checkout's neighbour.
+
+    The neighbour is ``../shared/data/ntnu-rig``
+    (:func:`bfr_model.io.rig_conventions.default_data_dir`).
+    """
+    env = os.environ.get("BFR_RIG_DATA")
+    return Path(env) if env else default_data_dir()
 
 
 def not_measured(spec: FigureSpec, reason: str) -> Figure:

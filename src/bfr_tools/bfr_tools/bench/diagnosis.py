@@ -13,6 +13,13 @@ recording its own sensor timing): ten closed-loop bags of ``diagnose_duration / 
 ``bfr diagnose <bag1> ... <bag10> --json --no-plots --quiet`` timed like the single one.
 ``bfr blindtest --cases N --json`` is timed the same way (its default recording length,
 workers and null runs; a small case count keeps the bench short).
+
+Real recordings cost more than the bench's bag (every stage selects something, the contour's
+harmonics are fitted with up to 16 parameters): ``diagnose.real_s_per_s`` is the wall time
+of ``bfr diagnose LOG --json --no-plots --quiet`` (empty cache) per second of recording on
+each closed-loop rolling log of the real rig that is present (:data:`REAL_LOGS` in
+``$BFR_RIG_DATA``, default ``../shared/data/ntnu-rig``), one value per log; the issue's
+budget of 60 s for a 60 s recording is 1 s per second. Not measured with ``--quick``.
 """
 
 from __future__ import annotations
@@ -36,9 +43,13 @@ from bfr_tools.bench.common import (
     FigureSpec,
     Progress,
     not_measured,
+    rig_data_dir,
 )
 
-__all__ = ["SPECS", "run", "run_measured"]
+__all__ = ["REAL_LOGS", "SPECS", "run", "run_measured"]
+
+#: The real rig's closed-loop rolling logs timed by ``diagnose.real_s_per_s`` (those present).
+REAL_LOGS = ("fin.txt", "Actually_worked.txt")
 
 SPECS: list[FigureSpec] = [
     FigureSpec("diagnose.wall_s", "bfr diagnose, 60 s recording: wall time", "s",
@@ -49,6 +60,8 @@ SPECS: list[FigureSpec] = [
                Budget("<", 300.0)),
     FigureSpec("diagnose.ten_peak_mib", "bfr diagnose, ten recordings together: peak memory",
                "MiB", Budget("<", 2048.0)),
+    FigureSpec("diagnose.real_s_per_s", "bfr diagnose, real rolling rig logs: wall time per "
+               "second recorded", "s/s", Budget("<", 1.0, "issue 12: 60 s for 60 s")),
     FigureSpec("diagnose.blindtest_wall_s", "bfr blindtest: wall time", "s"),
     FigureSpec("diagnose.blindtest_peak_mib", "bfr blindtest: peak memory (RSS)", "MiB"),
 ]
@@ -169,6 +182,7 @@ def _run(opts: BenchOptions, say: Progress, work: Path) -> list[Figure]:
             figs.append(Figure(spec_m, mems, note="ru_maxrss of the diagnose process "
                                                  "(os.wait4)"))
     figs += _ten(opts, say, work, env, duration)
+    figs.append(_real(opts, say, work, env))
     cases = 1 if opts.quick else opts.blindtest_cases
     spec_b, spec_bm = _BY_KEY["diagnose.blindtest_wall_s"], _BY_KEY["diagnose.blindtest_peak_mib"]
     say(f"diagnose: bfr blindtest --cases {cases} (cold null cache)")
@@ -237,3 +251,34 @@ def _ten(opts: BenchOptions, say: Progress, work: Path, env: dict[str, str],
             f"--no-plots --quiet`, empty BFR_CACHE_DIR; 1 run; verdict: {verdict}")
     return [Figure(spec_w, [w], note=note, extra={"verdict": verdict}),
             Figure(spec_m, [m], note="ru_maxrss of the diagnose process (os.wait4)")]
+
+
+def _real(opts: BenchOptions, say: Progress, work: Path, env: dict[str, str]) -> Figure:
+    """Wall time per recorded second on the real rig's rolling logs (module docstring)."""
+    spec = _BY_KEY["diagnose.real_s_per_s"]
+    if opts.quick:
+        return not_measured(spec, "not run with --quick (a minute or more per log)")
+    data = rig_data_dir()
+    logs = [data / n for n in REAL_LOGS if (data / n).is_file()]
+    if not logs:
+        return not_measured(spec, f"none of {', '.join(REAL_LOGS)} in {data} "
+                                  "(set BFR_RIG_DATA)")
+    vals, parts = [], []
+    for k, log in enumerate(logs):
+        say(f"diagnose: bfr diagnose on the real log {log.name}, cold null cache")
+        cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
+        w, m, c = run_measured(_cli("diagnose", str(log), "--json", "--no-plots", "--quiet"),
+                               {**env, "BFR_CACHE_DIR": str(cache)}, work / f"real{k}.out",
+                               work / f"real{k}.err", 1800.0)
+        if c != 0:
+            return not_measured(spec, f"bfr diagnose {log.name} exit {c}: "
+                                      f"{_tail(work / f'real{k}.err')}")
+        try:
+            rec_s = float(json.loads((work / f"real{k}.out").read_text())["duration"])
+        except (OSError, ValueError, KeyError, TypeError):
+            return not_measured(spec, f"no duration in the JSON of {log.name}")
+        vals.append(w / rec_s)
+        parts.append(f"{log.name}: {w:.1f} s for {rec_s:.1f} s, {m:.0f} MiB")
+        say(f"diagnose: {parts[-1]}")
+    return Figure(spec, vals, note="`bfr diagnose LOG --json --no-plots --quiet`, empty "
+                                   "BFR_CACHE_DIR, one run per log; " + "; ".join(parts))

@@ -24,7 +24,15 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bfr_tools.bench.common import BenchOptions, Budget, Figure, FigureSpec, Progress, not_measured
+from bfr_tools.bench.common import (
+    BenchOptions,
+    Budget,
+    Figure,
+    FigureSpec,
+    Progress,
+    not_measured,
+    rig_data_dir,
+)
 from bfr_tools.bench.diagnosis import run_measured
 
 __all__ = ["SPECS", "make_big_log", "run"]
@@ -38,13 +46,6 @@ SPECS: list[FigureSpec] = [
                "MiB"),
     FigureSpec("read.log_mb_per_s", "bfr read, 200 MB rig log: input MB per second", ""),
 ]
-
-
-def _data_dir() -> Path:
-    env = os.environ.get("BFR_RIG_DATA")
-    if env:
-        return Path(env)
-    return Path(__file__).resolve().parents[4].parent / "shared" / "data" / "ntnu-rig"
 
 
 def make_big_log(path: Path, target_bytes: int, data: Path) -> int:
@@ -69,7 +70,7 @@ def make_big_log(path: Path, target_bytes: int, data: Path) -> int:
 
 def run(opts: BenchOptions, say: Progress) -> list[Figure]:
     """Measure the ``read`` section (module docstring)."""
-    data = _data_dir()
+    data = rig_data_dir()
     if not data.is_dir():
         return [not_measured(s, f"no NTNU rig logs at {data} (set BFR_RIG_DATA)")
                 for s in SPECS]
