@@ -1,8 +1,9 @@
 """The equation error does not depend on what was evaluated before it.
 
 :meth:`bfr_diagnose.residual.ResidualEvaluator.evaluate` solves the contact angle of every
-sample by Newton's method from the last evaluation's solution (a warm start: a fit's next
-evaluation is a small step from the last one), and :class:`bfr_diagnose.identify.Problem`
+sample by Newton's method from the last evaluation's solution moved by the change of the
+ball's measured angle (a warm start: a fit's next evaluation is a small step from the last
+one), and :class:`bfr_diagnose.identify.Problem`
 keeps the physics of recent effect values. Both are speed-ups only: an evaluator that has
 seen other parameter sets, sensor models and a fitted contour first must give the same
 rows as a fresh one, to the Newton tolerance (1e-11 rad of the contact angle).

@@ -113,11 +113,12 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
     Returns
     -------
     tuple of ndarray
-        ``(p1b, f1b, p2, f2, phi, phi_dot, fn, pr)``: ``p1b = (M11 - J_f) th' + M12 ph'`` and
-        ``p2`` the generalised momenta without the frame's inertia [N m s],
+        ``(p1b, f1b, p2, f2, phi, phi_dot, fn, pr, dpsi)``: ``p1b = (M11 - J_f) th' + M12 ph'``
+        and ``p2`` the generalised momenta without the frame's inertia [N m s],
         ``f1b = -G1_ball`` (the ball's weight on the frame) and ``f2 = Q_phi - G2 + dT/dphi``
-        [N m], the contact angle [rad], its rate [rad/s], the normal force [N] and the
-        model's distance of the ball centre from the shaft ``|p(phi)|`` [m].
+        [N m], the contact angle [rad], its rate [rad/s], the normal force [N], the
+        model's distance of the ball centre from the shaft ``|p(phi)|`` [m] and
+        ``d psi / d phi`` at the solution [-] (the next evaluation's predictor).
     """
     n = theta.shape[0]
     pr_o = np.empty(n)
@@ -128,6 +129,7 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
     phi_o = np.empty(n)
     phid_o = np.empty(n)
     fn_o = np.empty(n)
+    dpsi_o = np.empty(n)
     m = P[I_M]
     g = P[I_G]
     cw = P[I_CW]
@@ -175,7 +177,8 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
         phid_o[i] = phd
         fn_o[i] = fn
         pr_o[i] = np.sqrt(px * px + py * py)
-    return p1, f1, p2, f2, phi_o, phid_o, fn_o, pr_o
+        dpsi_o[i] = dpsi
+    return p1, f1, p2, f2, phi_o, phid_o, fn_o, pr_o, dpsi_o
 
 
 def kernel_pair(J: int, dt: float) -> tuple[FloatArray, FloatArray]:
@@ -328,7 +331,8 @@ class ResidualEvaluator:
         self._sel_s = np.nonzero(ok_s)[0]           # usable nodes (subgrid positions)
         self._sel = self._grid[self._sel_s]         # ... as full-grid indices
         self._ok_full = np.nonzero(ok)[0]
-        self._phi_guess = None
+        # (psi, phi, d psi / d phi) of the last evaluation: Newton's start (_predicted)
+        self._last_solution: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._ball_cache: tuple | None = None  # the ball's terms of the last evaluation
         self._model: RigidModel | None = None   # the last evaluation's model
 
@@ -377,16 +381,12 @@ class ResidualEvaluator:
             psi_w, psi_wd, rho = prep.ball_for(sensor)
             psi = th + psi_w[sel]
             psid = prep.theta_dot[sel] + psi_wd[sel]
-            guess = self._phi_guess if self._phi_guess is not None else psi
-            p1b, f1b, p2, f2, phi, phid, fn, pr = pointwise_terms(
+            guess = psi if self._last_solution is None else self._predicted(psi)
+            p1b, f1b, p2, f2, phi, phid, fn, pr, dpsi = pointwise_terms(
                 th, prep.theta_dot[sel], prep.theta_ddot[sel], psi, psid, guess,
                 *model.kernel_args)
             if np.all(np.isfinite(phi)):
-                # warm start: a fit's next evaluation is a small step from this one (a
-                # Jacobian column, a trust-region step), so Newton starts within 1e-4 rad
-                # rather than the first evaluation's (up to 0.03 rad off once a contour is
-                # fitted): one or two curve evaluations per sample instead of four
-                self._phi_guess = phi
+                self._last_solution = (psi, phi, dpsi)
             r2 = self._conv(self._nodes(p2), self.kd) - self._conv(self._nodes(f2), self.k)
             r3 = self._conv(self._nodes(rho[sel] - pr), self.k)
             ball = (self._conv(self._nodes(p1b), self.kd) - self._conv(self._nodes(f1b), self.k),
@@ -402,6 +402,22 @@ class ResidualEvaluator:
                   - self._conv(self._nodes(q1), self.k))
         return Residual(r1, r2, self.idx, grid=self._to_grid, nodes=grid_nodes, n=prep.n,
                         r3=r3)
+
+    def _predicted(self, psi: FloatArray) -> FloatArray:
+        """Newton's starting contact angles for the ball-centre angles ``psi``.
+
+        The last evaluation's solution moved to first order by the change of ``psi``:
+        ``phi_0 = phi_last + (psi - psi_last) / psi'(phi_last)``. A fit's next evaluation is
+        a small step from its last (a Jacobian column, a trust-region step): a step of the
+        camera's model moves ``psi`` by about 1e-5 rad and leaves the predictor 1e-10 off, a
+        step of the contour moves the solution by a few 1e-6 rad; started from the first
+        evaluation's solution instead (up to 0.03 rad off once a contour is fitted), Newton
+        took three to four curve evaluations per sample, now about two. The tolerance is
+        the kernel's (1e-11 rad), so the rows do not depend on the start.
+        """
+        psi0, phi0, dpsi0 = self._last_solution
+        ok = np.isfinite(dpsi0) & (dpsi0 > 0.0)
+        return phi0 + np.where(ok, psi - psi0, 0.0) / np.where(ok, dpsi0, 1.0)
 
     def _nodes(self, arr: FloatArray) -> FloatArray:
         """Values at the usable nodes -> every quadrature node (zero elsewhere)."""
