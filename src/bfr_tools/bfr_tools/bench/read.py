@@ -24,15 +24,8 @@ import sys
 import tempfile
 from pathlib import Path
 
-from bfr_tools.bench.common import (
-    BenchOptions,
-    Budget,
-    Figure,
-    FigureSpec,
-    Progress,
-    not_measured,
-    rig_data_dir,
-)
+from bfr_tools.bench import common
+from bfr_tools.bench.common import BenchOptions, Budget, Figure, FigureSpec, Progress, not_measured
 from bfr_tools.bench.diagnosis import run_measured
 
 __all__ = ["SPECS", "make_big_log", "run"]
@@ -70,7 +63,7 @@ def make_big_log(path: Path, target_bytes: int, data: Path) -> int:
 
 def run(opts: BenchOptions, say: Progress) -> list[Figure]:
     """Measure the ``read`` section (module docstring)."""
-    data = rig_data_dir()
+    data = common.rig_data_dir()
     if not data.is_dir():
         return [not_measured(s, f"no NTNU rig logs at {data} (set BFR_RIG_DATA)")
                 for s in SPECS]
