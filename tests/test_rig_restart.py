@@ -26,13 +26,18 @@ def test_kill_and_restart_the_controller(ros_harness: rosutil.RosHarness,
     h = ros_harness
     states: list[ControllerState] = []
     truth: list[SimTruth] = []
-    h.node.create_subscription(ControllerState, "controller_state", states.append, STATE_QOS)
+    ssub = h.node.create_subscription(ControllerState, "controller_state", states.append,
+                                      STATE_QOS)
     tsub = h.node.create_subscription(SimTruth, "sim_truth", truth.append, STATE_QOS)
     start = orbit_start(0.3, 0.05)
     ctl_args = ["-p", "use_sim_time:=true", "-p", "safety.watchdog_timeout:=5.0"]
     node_processes.start("bfr_camera", "camera_node",
                          ros_args=["-p", "use_sim_time:=true", "-p", "input.frame_timeout:=5.0"])
     ctl = node_processes.start("bfr_control", "controller_node", ros_args=ctl_args)
+    # the controller's state reaches this harness before the simulation runs: lock-step can
+    # pass 3 s of simulated time before discovery matches a late subscription (a clean-clone
+    # CI once received no state at all while the controller logged ROLLING)
+    h.wait_for_match(ssub, timeout=60)
     sim = node_processes.start("bfr_sim", "simulator_node", ros_args=[
         "-p", "sim.mode:=lockstep", "-p", "lockstep.timeout:=1.0",
         "-p", "start.wait_subscribers:=2", "-p", "render.noise_sigma:=0.0",
