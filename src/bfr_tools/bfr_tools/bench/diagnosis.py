@@ -32,7 +32,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -111,6 +111,38 @@ def _tail(path: Path, n: int = 400) -> str:
         return ""
 
 
+@dataclass(frozen=True, kw_only=True)
+class _Diagnosis:
+    """One timed ``bfr diagnose ... --json --no-plots --quiet`` run with an empty cache."""
+
+    wall: float                   # [s]
+    mib: float                    # [MiB] peak RSS
+    code: int                     # exit status (negative: timed out)
+    doc: dict[str, Any]           # its JSON ({} when unreadable)
+    failure: str                  # "" or the reason it failed (exit status, stderr's tail)
+
+
+def _diagnose_cold(inputs: list[str], env: dict[str, str], work: Path, tag: str,
+                   timeout: float, profile: Path | None = None) -> _Diagnosis:
+    """Run ``bfr diagnose INPUTS --json --no-plots --quiet`` with a fresh ``BFR_CACHE_DIR``.
+
+    Stdout and stderr go to ``work/TAG.out`` and ``work/TAG.err``; ``profile`` runs it under
+    cProfile writing there.
+    """
+    cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
+    cmd = _cli("diagnose", *inputs, "--json", "--no-plots", "--quiet")
+    if profile is not None:
+        cmd = [cmd[0], "-m", "cProfile", "-o", str(profile), *cmd[1:]]
+    out, err = work / f"{tag}.out", work / f"{tag}.err"
+    w, m, c = run_measured(cmd, {**env, "BFR_CACHE_DIR": str(cache)}, out, err, timeout)
+    try:
+        doc = json.loads(out.read_text()) if c == 0 else {}
+    except (OSError, ValueError):
+        doc = {}
+    return _Diagnosis(wall=w, mib=m, code=c, doc=doc if isinstance(doc, dict) else {},
+                      failure="" if c == 0 else f"bfr diagnose exit {c}: {_tail(err)}")
+
+
 def run(opts: BenchOptions, say: Progress) -> list[Figure]:
     """Measure the ``diagnose`` section (module docstring)."""
     work = (Path(opts.keep) / "diagnose" if opts.keep
@@ -150,26 +182,18 @@ def _run(opts: BenchOptions, say: Progress, work: Path) -> list[Figure]:
         for rep in range(opts.diagnose_repeats):
             say(f"diagnose: bfr diagnose on the {duration:g} s recording, cold null cache, "
                 f"run {rep + 1}/{opts.diagnose_repeats}")
-            cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
-            env_d = {**env, "BFR_CACHE_DIR": str(cache)}
-            cmd = _cli("diagnose", str(bag), "--json", "--no-plots", "--quiet")
+            prof = None
             if opts.profile:
                 Path(opts.profile).mkdir(parents=True, exist_ok=True)
-                out = Path(opts.profile).resolve() / f"diagnose-{rep}.prof"
-                cmd = [cmd[0], "-m", "cProfile", "-o", str(out), *cmd[1:]]
-            w, m, c = run_measured(cmd, env_d, work / f"diagnose-{rep}.out",
-                                   work / f"diagnose-{rep}.err", 900.0)
-            if c != 0:
-                failure = f"bfr diagnose exit {c}: {_tail(work / f'diagnose-{rep}.err')}"
+                prof = Path(opts.profile).resolve() / f"diagnose-{rep}.prof"
+            d = _diagnose_cold([str(bag)], env, work, f"diagnose-{rep}", 900.0, prof)
+            if d.failure:
+                failure = d.failure
                 break
-            walls.append(w)
-            mems.append(m)
-            try:
-                verdict = str(json.loads((work / f"diagnose-{rep}.out").read_text())
-                              .get("verdict", ""))
-            except (OSError, ValueError):
-                verdict = ""
-            say(f"diagnose: {w:.1f} s wall, peak RSS {m:.0f} MiB")
+            walls.append(d.wall)
+            mems.append(d.mib)
+            verdict = str(d.doc.get("verdict", ""))
+            say(f"diagnose: {d.wall:.1f} s wall, peak RSS {d.mib:.0f} MiB")
         if failure:
             figs += [not_measured(spec_w, failure), not_measured(spec_m, failure)]
         else:
@@ -235,17 +259,11 @@ def _ten(opts: BenchOptions, say: Progress, work: Path, env: dict[str, str],
             return [not_measured(spec_w, reason), not_measured(spec_m, reason)]
         bags.append(str(work / f"ten{k}"))
     say("diagnose: bfr diagnose on the ten recordings together, cold null cache")
-    cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
-    w, m, c = run_measured(_cli("diagnose", *bags, "--json", "--no-plots", "--quiet"),
-                           {**env, "BFR_CACHE_DIR": str(cache)}, work / "ten.out",
-                           work / "ten.err", 1800.0)
-    if c != 0:
-        reason = f"bfr diagnose exit {c}: {_tail(work / 'ten.err')}"
-        return [not_measured(spec_w, reason), not_measured(spec_m, reason)]
-    try:
-        verdict = str(json.loads((work / "ten.out").read_text()).get("verdict", ""))
-    except (OSError, ValueError):
-        verdict = ""
+    d = _diagnose_cold(bags, env, work, "ten", 1800.0)
+    if d.failure:
+        return [not_measured(spec_w, d.failure), not_measured(spec_m, d.failure)]
+    w, m = d.wall, d.mib
+    verdict = str(d.doc.get("verdict", ""))
     say(f"diagnose: ten recordings {w:.1f} s wall, peak RSS {m:.0f} MiB")
     note = (f"ten {each:g} s closed-loop bags (seeds 1-10), one `bfr diagnose <10 bags> --json "
             f"--no-plots --quiet`, empty BFR_CACHE_DIR; 1 run; verdict: {verdict}")
@@ -266,19 +284,15 @@ def _real(opts: BenchOptions, say: Progress, work: Path, env: dict[str, str]) ->
     vals, parts = [], []
     for k, log in enumerate(logs):
         say(f"diagnose: bfr diagnose on the real log {log.name}, cold null cache")
-        cache = Path(tempfile.mkdtemp(prefix="cache-", dir=work))
-        w, m, c = run_measured(_cli("diagnose", str(log), "--json", "--no-plots", "--quiet"),
-                               {**env, "BFR_CACHE_DIR": str(cache)}, work / f"real{k}.out",
-                               work / f"real{k}.err", 1800.0)
-        if c != 0:
-            return not_measured(spec, f"bfr diagnose {log.name} exit {c}: "
-                                      f"{_tail(work / f'real{k}.err')}")
+        d = _diagnose_cold([str(log)], env, work, f"real{k}", 1800.0)
+        if d.failure:
+            return not_measured(spec, f"{log.name}: {d.failure}")
         try:
-            rec_s = float(json.loads((work / f"real{k}.out").read_text())["duration"])
-        except (OSError, ValueError, KeyError, TypeError):
+            rec_s = float(d.doc["duration"])
+        except (KeyError, TypeError, ValueError):
             return not_measured(spec, f"no duration in the JSON of {log.name}")
-        vals.append(w / rec_s)
-        parts.append(f"{log.name}: {w:.1f} s for {rec_s:.1f} s, {m:.0f} MiB")
+        vals.append(d.wall / rec_s)
+        parts.append(f"{log.name}: {d.wall:.1f} s for {rec_s:.1f} s, {d.mib:.0f} MiB")
         say(f"diagnose: {parts[-1]}")
     return Figure(spec, vals, note="`bfr diagnose LOG --json --no-plots --quiet`, empty "
                                    "BFR_CACHE_DIR, one run per log; " + "; ".join(parts))
