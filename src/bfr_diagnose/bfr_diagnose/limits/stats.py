@@ -13,8 +13,9 @@ or a triple), with ``x = log10(size / FLOOR[e])`` (``x`` in ``[-1, 1]`` by the d
 
 Over the run: the **confusion matrix** (rows: each concealed effect and ``clean``; columns:
 the effect itself when found, else the tool's top-1, else ``none``), **pairs and triples
-found as such** (the set exactly), the **false-positive rate** over the clean cases (any
-effect named) with its Wilson 95 % interval, and per model structure (rigid, contact).
+found as such** (the set exactly) and all found (also beyond chance: minus the share of
+clean cases on which the tool names the whole set), the **false-positive rate** over the clean
+cases (any effect named) with its Wilson 95 % interval, and per model structure (rigid, contact).
 
 Wilson interval (Wilson 1927) of ``k`` successes in ``n``, ``z = 1.96``:
 ``(p + z^2/2n -+ z sqrt(p(1-p)/n + z^2/4n^2)) / (1 + z^2/n)``, ``p = k/n``.
@@ -164,6 +165,33 @@ def _confusion(rows: list[dict[str, Any]], tool: str) -> dict[str, dict[str, int
     return conf
 
 
+def _all_found_beyond_chance(sub: list[dict[str, Any]], clean: list[dict[str, Any]],
+                             tool: str, n_boot: int, rng: np.random.Generator
+                             ) -> dict[str, Any]:
+    """All of a case's effects found, minus the chance of naming them all on a clean case.
+
+    Informedness of a set (module docstring): ``J = mean_i [S_i found] - mean_i c(S_i)``
+    over the cases ``i`` with the set ``S_i``, ``c(S)`` the share of clean cases on which the
+    tool names every effect of ``S``; 95 % percentile bootstrap over both kinds of case.
+    """
+    if not sub or not clean:
+        return {"rate": float("nan"), "lo": float("nan"), "hi": float("nan"), "n": len(sub)}
+    hit = np.array([set(_truth(r)) <= set(_found(r, tool)) for r in sub], float)
+    named = [set(_found(r, tool)) for r in clean]
+    sets = [set(_truth(r)) for r in sub]
+    # chance[i, j]: clean case j names every effect of case i's set
+    chance = np.array([[s <= f for f in named] for s in sets], float)
+
+    def j_of(i: NDArray[np.int_], k: NDArray[np.int_]) -> float:
+        return float(hit[i].mean() - chance[np.ix_(i, k)].mean())
+
+    j = j_of(np.arange(len(sub)), np.arange(len(clean)))
+    boots = [j_of(rng.integers(0, len(sub), len(sub)), rng.integers(0, len(clean), len(clean)))
+             for _ in range(n_boot)]
+    lo, hi = (np.percentile(boots, [2.5, 97.5]) if boots else (float("nan"),) * 2)
+    return {"rate": j, "lo": float(lo), "hi": float(hi), "n": len(sub)}
+
+
 def _tool_summary(rows: list[dict[str, Any]], tool: str, n_boot: int,
                   rng: np.random.Generator) -> dict[str, Any]:
     clean = [r for r in rows if not _truth(r)]
@@ -185,6 +213,8 @@ def _tool_summary(rows: list[dict[str, Any]], tool: str, n_boot: int,
     for kind in ("pair", "triple"):
         sub = [r for r in rows if r["kind"] == kind]
         s[f"{kind}_all_found"] = _rate([set(_truth(r)) <= set(_found(r, tool)) for r in sub])
+        s[f"{kind}_all_found_beyond_chance"] = _all_found_beyond_chance(sub, clean, tool,
+                                                                        n_boot, rng)
     mech: dict[str, Any] = {}
     for e in EFFECT_NAMES:
         sub = [r for r in rows if e in _truth(r)]
@@ -285,6 +315,10 @@ def report_markdown(summary: dict[str, Any]) -> str:
             ("exact set, node-suite truth (bags)", "exact_nodes")]
     for label, key in rows:
         lines.append(f"| {label} | {_pct(b[key])} | {_pct(p[key])} |")
+        if key.endswith("_all_found"):
+            lines.append(f"| ... beyond chance (J: minus naming them all on a clean case) | "
+                         f"{_diff(b[key + '_beyond_chance'])} | "
+                         f"{_diff(p[key + '_beyond_chance'])} |")
     lines.append(f"| effects named beside the truth, per effect case | "
                  f"{b['extra_per_effect_case']:.2f} | {p['extra_per_effect_case']:.2f} |")
     lines += ["", "Per mechanism (F = the effect's reference size FLOOR = 10 x its reporting "
