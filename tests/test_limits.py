@@ -148,3 +148,22 @@ def test_cases_on_a_local_cluster_resume_and_report(tmp_path: Path) -> None:
     summ = json.loads((out / "summary.json").read_text())
     assert summ["scored"] == 2 and summ["records"] == 2
     assert "| false positives on clean cases |" in (out / "report.md").read_text()
+
+
+def test_all_found_beyond_chance_discounts_a_tool_that_names_everything() -> None:
+    """A tool that names every mechanism on every case finds every pair, and has J = 0; a
+    tool that names exactly the truth has J = 1; one that finds the pair half the time and
+    names it on no clean case has J = 0.5 (its interval about it)."""
+    rng = np.random.default_rng(0)
+    pairs = [{"effects": "ball_mass;frame_inertia"}, {"effects": "track_bumps;torque_gain"}]
+    clean = [{"effects": ""} for _ in range(20)]
+    everything = ";".join(EFFECT_NAMES)
+    for r in [*pairs, *clean]:
+        r["peer_found"] = everything
+        r["bfr_found"] = r["effects"]
+    assert stats._all_found_beyond_chance(pairs, clean, "peer", 50, rng)["rate"] == 0.0
+    assert stats._all_found_beyond_chance(pairs, clean, "bfr", 50, rng)["rate"] == 1.0
+    half = [dict(p, bfr_found=p["effects"] if i % 2 else "") for i, p in
+            enumerate(pairs * 10)]
+    j = stats._all_found_beyond_chance(half, clean, "bfr", 200, rng)
+    assert j["rate"] == pytest.approx(0.5) and j["lo"] < 0.5 < j["hi"]
