@@ -50,6 +50,7 @@ Every operation is zero-phase.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -301,11 +302,36 @@ class Prepared:
         return self.psi_for(SensorCorrection(latency=extra_latency))
 
     def u_for(self, sensor: SensorCorrection | None = None) -> FloatArray:
-        """The torque acting at each grid time [N m]: ``u(t - torque_delay)``."""
+        """The torque acting at each grid time [N m]: ``u(t - torque_delay)``.
+
+        Cubic (four-point Lagrange) interpolation of the filtered torque between grid
+        samples (:func:`shifted`): a straight line between them bends it by
+        ``-s (1 - s) h^2 u'' / 2`` at a fraction s of the step h, a relative error of
+        ``(omega h)^2 / 8`` at s = 1/2 (1e-4 at 10 rad/s on the 2 ms grid), which a torque
+        gain or a frame inertia of that size then explained.
+        """
         d = 0.0 if sensor is None else sensor.torque_delay
         if d == 0.0:
             return self.u
-        return np.interp(self.t - d, self.t, self.u)
+        return shifted(self.u, d / float(self.t[1] - self.t[0]))
+
+
+def shifted(y: FloatArray, shift: float) -> FloatArray:
+    """``y`` delayed by ``shift`` samples (any real number): ``y(i - shift)``.
+
+    Four-point Lagrange interpolation (exact for cubics, error ``O(h^4 y'''')``) with the
+    same weights at every sample; beyond the ends ``y`` continues with its end values.
+    """
+    k0 = math.floor(-shift)
+    f = -shift - k0
+    w = ((-f * (f - 1.0) * (f - 2.0) / 6.0, -1), ((f + 1.0) * (f - 1.0) * (f - 2.0) / 2.0, 0),
+         (-(f + 1.0) * f * (f - 2.0) / 2.0, 1), ((f + 1.0) * f * (f - 1.0) / 6.0, 2))
+    n = y.size
+    idx = np.arange(n) + k0
+    out = np.zeros(n)
+    for wj, j in w:
+        out += wj * y[np.clip(idx + j, 0, n - 1)]
+    return out
 
 
 def _odd(n: float) -> int:
