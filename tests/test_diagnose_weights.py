@@ -85,22 +85,38 @@ def test_contact_truth_dry_friction_is_found_and_alone(case_215: tuple) -> None:
                if n != "joint_coulomb_friction")
 
 
-def test_the_bic_gives_each_row_its_own_variance() -> None:
-    """``dBIC = sum_s N_s ln(C1_s / C0_s) + k ln N``: a row explained to 0.1 % of its cost
-    beside a row that holds 37 times its cost is decisive (about -200), where the pooled
-    ``N ln(sum C1 / sum C0)`` rose by 2.5; with rows of equal share the two agree to first
-    order in the change."""
-    n_seg, n_eff = np.array([500.0, 500.0]), 60.0
+def test_the_bic_gives_each_row_its_own_variance_never_below_the_noise() -> None:
+    """``dBIC = sum_s N_s (f(x1) - f(x0)) + k ln N``, ``x = g C / n`` in units of the null's
+    noise, ``f(x) = ln x + 1`` above 1 and ``x`` below.
+
+    A misfit row (its scale 10x its noise: g = 100) explained to 0.1 % of its cost beside a
+    row holding 37 times its cost is decisive (about -115), where the pooled
+    ``N ln(sum C1 / sum C0)`` rose by 2.5. A row already at the noise (g = 1, x = 0.19,
+    the independent rig's clean ball row) that loses 37 % of its cost gains only that cost
+    over its correlation time: as a known variance, not the -11 a profiled one gave it."""
+    n_seg, n_eff = np.array([495.0, 495.0]), 60.0
     c0, c1 = np.array([100.0, 3700.0]), np.array([0.1, 3700.0])
-    per_row = _dbic(c0, c1, n_seg, n_eff, 1)
-    assert per_row == pytest.approx(30.0 * np.log(1e-3) + np.log(60.0), rel=1e-12)
+    g = np.array([100.0, 1.0])
+    def f(x: float) -> float:
+        return float(np.log(x) + 1.0) if x >= 1.0 else x
+
+    per_row = _dbic(c0, c1, n_seg, n_eff, 1, scale=g)
+    x0, x1 = 100.0 * 100.0 / 495.0, 100.0 * 0.1 / 495.0
+    assert per_row == pytest.approx(30.0 * (f(x1) - f(x0)) + np.log(60.0), rel=1e-12)
     pooled = n_eff * np.log(c1.sum() / c0.sum()) + np.log(n_eff)
     assert per_row < -6.0 < pooled
-    c0, c1 = np.array([500.0, 500.0]), np.array([499.0, 499.0])
+    # at the noise: the known-variance change (C1 - C0) / tau
+    c0, c1 = np.array([92.5, 528.6]), np.array([58.0, 528.6])
+    tau = n_seg.sum() / n_eff
+    assert _dbic(c0, c1, n_seg, n_eff, 1) == pytest.approx((58.0 - 92.5) / tau + np.log(60.0),
+                                                          rel=1e-12)
+    assert _dbic(c0, c1, n_seg, n_eff, 1) > -6.0
+    # rows of equal share above the noise: the pooled BIC to first order
+    c0, c1 = np.array([1500.0, 1500.0]), np.array([1497.0, 1497.0])
     pooled = n_eff * np.log(c1.sum() / c0.sum()) + np.log(n_eff)
     assert _dbic(c0, c1, n_seg, n_eff, 1) == pytest.approx(pooled, rel=1e-12)
     # only the segments asked for (the group test's recordings), and nothing to compare
     use = np.array([True, False])
-    assert _dbic(np.array([100.0, 3700.0]), np.array([0.1, 1.0]), n_seg, n_eff, 1, use) == \
-        pytest.approx(30.0 * np.log(1e-3) + np.log(30.0), rel=1e-12)
+    assert _dbic(np.array([100.0, 3700.0]), np.array([0.1, 1.0]), n_seg, n_eff, 1, use,
+                 g) == pytest.approx(30.0 * (f(x1) - f(x0)) + np.log(30.0), rel=1e-12)
     assert _dbic(np.zeros(2), np.zeros(2), n_seg, n_eff, 1) == np.inf
