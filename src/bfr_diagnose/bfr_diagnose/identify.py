@@ -883,11 +883,6 @@ class _Stage:
     seg_scale: FloatArray   # each segment's (sigma / sigma_null)^2 (its weights' unit)
 
     @property
-    def costs(self) -> tuple[float, float]:
-        """(training cost, held-out cost) of the chosen effects."""
-        return self.cost_train, self.cost_test
-
-    @property
     def chosen_names(self) -> list[str]:
         """Names of the chosen effects."""
         return [e.name for e, _ in self.chosen]
