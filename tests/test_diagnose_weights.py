@@ -93,7 +93,8 @@ def test_the_bic_gives_each_row_its_own_variance_never_below_the_noise() -> None
     row holding 37 times its cost is decisive (about -115), where the pooled
     ``N ln(sum C1 / sum C0)`` rose by 2.5. A row already at the noise (g = 1, x = 0.19,
     the independent rig's clean ball row) that loses 37 % of its cost gains only that cost
-    over its correlation time: as a known variance, not the -11 a profiled one gave it."""
+    over its correlation time: as a known variance, not the -11 a profiled one gave it. The
+    pooled BIC (one variance for all rows) is the other noise model; the stronger counts."""
     n_seg, n_eff = np.array([495.0, 495.0]), 60.0
     c0, c1 = np.array([100.0, 3700.0]), np.array([0.1, 3700.0])
     g = np.array([100.0, 1.0])
@@ -105,12 +106,20 @@ def test_the_bic_gives_each_row_its_own_variance_never_below_the_noise() -> None
     assert per_row == pytest.approx(30.0 * (f(x1) - f(x0)) + np.log(60.0), rel=1e-12)
     pooled = n_eff * np.log(c1.sum() / c0.sum()) + np.log(n_eff)
     assert per_row < -6.0 < pooled
-    # at the noise: the known-variance change (C1 - C0) / tau
+    # at the noise: the known-variance change (C1 - C0) / tau, or the pooled one if stronger
     c0, c1 = np.array([92.5, 528.6]), np.array([58.0, 528.6])
     tau = n_seg.sum() / n_eff
-    assert _dbic(c0, c1, n_seg, n_eff, 1) == pytest.approx((58.0 - 92.5) / tau + np.log(60.0),
+    known = (58.0 - 92.5) / tau
+    pooled = n_eff * np.log(c1.sum() / c0.sum())
+    assert _dbic(c0, c1, n_seg, n_eff, 1) == pytest.approx(min(known, pooled) + np.log(60.0),
                                                           rel=1e-12)
     assert _dbic(c0, c1, n_seg, n_eff, 1) > -6.0
+    # every row below a null noise that is too large (the group test's frame-only runs):
+    # one variance for all of them is the stronger model, and a 25 % drop is decisive
+    c0, c1 = np.array([44.5, 30.7]), np.array([34.3, 21.8])
+    pooled = n_eff * np.log(c1.sum() / c0.sum())
+    assert _dbic(c0, c1, n_seg, n_eff, 1) == pytest.approx(pooled + np.log(60.0), rel=1e-12)
+    assert _dbic(c0, c1, n_seg, n_eff, 1) < -6.0
     # rows of equal share above the noise: the pooled BIC to first order
     c0, c1 = np.array([1500.0, 1500.0]), np.array([1497.0, 1497.0])
     pooled = n_eff * np.log(c1.sum() / c0.sum()) + np.log(n_eff)
@@ -118,5 +127,6 @@ def test_the_bic_gives_each_row_its_own_variance_never_below_the_noise() -> None
     # only the segments asked for (the group test's recordings), and nothing to compare
     use = np.array([True, False])
     assert _dbic(np.array([100.0, 3700.0]), np.array([0.1, 1.0]), n_seg, n_eff, 1, use,
-                 g) == pytest.approx(30.0 * (f(x1) - f(x0)) + np.log(30.0), rel=1e-12)
+                 g) == pytest.approx(min(30.0 * (f(x1) - f(x0)), 30.0 * np.log(1e-3))
+                                     + np.log(30.0), rel=1e-12)
     assert _dbic(np.zeros(2), np.zeros(2), n_seg, n_eff, 1) == np.inf
