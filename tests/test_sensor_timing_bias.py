@@ -22,9 +22,11 @@ held command, integrated exactly between lines, its angle quantised to 1 mrad.
 
 from __future__ import annotations
 
+import pickle
+
 import numpy as np
 import pytest
-from bfr_diagnose.preprocess import PrepConfig, prepare, shifted
+from bfr_diagnose.preprocess import Prepared, PrepConfig, SensorCorrection, prepare
 from bfr_model.io.timing import velocity_lag
 from bfr_model.recording import Recording
 
@@ -101,12 +103,20 @@ def test_a_pure_inertia_balances_through_the_coarse_encoder_path() -> None:
 def test_the_torque_delay_moves_the_torque_without_bending_it(delay: float) -> None:
     """``u(t - d)`` between grid samples: a straight line between the 2 ms samples bent a
     9 rad/s command by up to 1e-4 of its amplitude (the torque's scale at the orbit's
-    frequencies, which a torque gain then explained); the four-point interpolation is
-    exact to 1e-6."""
+    frequencies, which a torque gain then explained); the torque's spline is exact to 1e-6,
+    keeps its end values beyond the ends, and the recording still pickles (to a Dask worker)
+    once the spline is built."""
     t = np.arange(0.0, 3.0, 2e-3)
     y = np.sin(9.0 * t) + 0.3 * np.sin(23.0 * t)
     want = np.sin(9.0 * (t - delay)) + 0.3 * np.sin(23.0 * (t - delay))
+    zeros, ok = np.zeros(t.size), np.ones(t.size, bool)
+    prep = Prepared(t=t, theta=zeros, theta_dot=zeros, theta_ddot=zeros, u=y, psi_w=zeros,
+                    psi_w_dot=zeros, ball_ok=ok, frame_ok=ok, has_ball=False, latency0=0.0)
+    got = prep.u_for(SensorCorrection(torque_delay=delay))
     inner = slice(10, -10)
-    assert np.max(np.abs(shifted(y, delay / 2e-3) - want)[inner]) < 1e-6
+    assert np.max(np.abs(got - want)[inner]) < 1e-6
     assert np.max(np.abs(np.interp(t - delay, t, y) - want)[inner]) > 5e-5
-    assert np.array_equal(shifted(y, 3.0), np.concatenate([[y[0]] * 3, y[:-3]]))
+    assert got[0 if delay > 0 else -1] == pytest.approx(y[0 if delay > 0 else -1], abs=1e-12)
+    assert prep.u_for(None) is y
+    again = pickle.loads(pickle.dumps(prep)).u_for(SensorCorrection(torque_delay=delay))
+    assert np.array_equal(again, got)
