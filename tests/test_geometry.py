@@ -6,8 +6,15 @@ import math
 
 import numpy as np
 import pytest
-from bfr_model.geometry import OffsetCurve
-from bfr_model.params import ParameterError, RigParams, load_params, params_to_ros_yaml
+from bfr_model.geometry import OffsetCurve, contour_kernel
+from bfr_model.params import (
+    ParameterError,
+    RigParams,
+    load_params,
+    params_from_dict,
+    params_to_dict,
+    params_to_ros_yaml,
+)
 from scipy.integrate import quad
 
 NOMINAL = load_params()
@@ -19,6 +26,61 @@ def curve() -> OffsetCurve:
         "frame.contour.harmonic_orders": [3], "frame.contour.harmonic_cos": [1e-3],
         "frame.contour.harmonic_sin": [-5e-4], "track.bump_phi": [1.0],
         "track.bump_height": [3e-4], "track.bump_width": [0.08]}))
+
+
+@pytest.mark.parametrize("orders", [[2.0, 1.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0], [2.0, 16.0, 9.0],
+                                    [2.0, 2.5, 3.0]])
+def test_contour_harmonics_and_their_derivatives_are_the_series(orders: list[float]) -> None:
+    """rho and its four derivatives against the series written out term by term: the
+    angle-addition recurrence (integer orders, in any order) and the direct path (a
+    non-integer order) agree with ``d^n/dphi^n (a cos k phi + b sin k phi)`` to 1e-15 m."""
+    rng = np.random.default_rng(3)
+    o = np.array(orders)
+    a, b = 1e-3 * rng.standard_normal(o.size), 1e-3 * rng.standard_normal(o.size)
+    phi = np.linspace(-7.0, 7.0, 401)
+    none = np.zeros(0)
+    got = contour_kernel(phi, 0.1, o, a, b, none, none, none)
+    want = [np.full_like(phi, 0.1), 0 * phi, 0 * phi, 0 * phi, 0 * phi]
+    for k, ak, bk in zip(o, a, b, strict=True):
+        for n in range(5):  # the n-th derivative advances the phase by n pi / 2
+            want[n] += k ** n * (ak * np.cos(k * phi + n * np.pi / 2)
+                                 + bk * np.sin(k * phi + n * np.pi / 2))
+    for n in range(5):
+        scale = max(float(np.max(o)) ** n, 1.0) * 1e-3
+        np.testing.assert_allclose(got[n], want[n], rtol=0, atol=1e-12 * scale)
+    scalar = contour_kernel(float(phi[7]), 0.1, o, a, b, none, none, none)
+    np.testing.assert_allclose(scalar, [g[7] for g in got], rtol=1e-15, atol=1e-18)
+
+
+@pytest.mark.parametrize("changes", [
+    {"frame.contour.harmonic_orders": (3, 5), "frame.contour.harmonic_cos": (1e-3, 0.0),
+     "frame.contour.harmonic_sin": (0.0, -2e-4)},
+    {"frame.contour.harmonic_orders": (3, 5), "frame.contour.harmonic_cos": (1e-3, 0.0),
+     "frame.contour.harmonic_sin": (0.0, 0.0)},                # an all-zero harmonic
+    {"frame.contour.harmonic_orders": (3.0,), "frame.contour.harmonic_cos": (1e-3,),
+     "frame.contour.harmonic_sin": (0,)},                      # a float order, an int
+    {"track.bump_phi": (1.0, 2.0), "track.bump_height": (2e-4, 0.0),
+     "track.bump_width": (0.1, 0.1)},                          # a bump of zero height
+    {"frame.contour.harmonic_orders": [3], "frame.contour.harmonic_cos": [1e-3],
+     "frame.contour.harmonic_sin": [0.0], "ball.mass": 3e-3},  # lists
+])
+def test_replace_with_tuples_is_the_parameter_file_s_replace(changes: dict) -> None:
+    """Tuples set directly (the fits' fast path) give exactly what the parameter file's
+    dictionary gives: zero entries dropped, orders integers, amplitudes floats."""
+    got = NOMINAL.replace(**changes)
+    d = params_to_dict(NOMINAL)
+    for key, value in changes.items():
+        node = d
+        *groups, name = key.split(".")
+        for g in groups:
+            node = node[g]
+        node[name] = list(value) if isinstance(value, tuple) else value
+    want = params_from_dict(d)
+    assert got == want
+    c = got.frame.contour
+    assert all(type(k) is int for k in c.harmonic_orders)
+    assert all(type(v) is float for v in (*c.harmonic_cos, *c.harmonic_sin))
+    assert 0.0 not in got.track.bump_height
 
 
 def test_offset_curve_is_at_rolling_radius_along_the_normal(curve: OffsetCurve) -> None:

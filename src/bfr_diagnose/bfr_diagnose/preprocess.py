@@ -253,13 +253,18 @@ class Prepared:
     info: dict[str, Any] = field(default_factory=dict)
     fixes: _Fixes | None = None
     _u_spline: _HeldSpline | None = field(default=None, init=False, repr=False, compare=False)
+    _u_shifted: tuple[float, FloatArray] | None = field(default=None, init=False, repr=False,
+                                                        compare=False)
+    _offset_view: tuple[tuple[float, float], tuple[FloatArray, FloatArray, FloatArray]] | None = (
+        field(default=None, init=False, repr=False, compare=False))
 
     @property
     def n(self) -> int:
         """Number of grid samples."""
         return int(self.t.size)
 
-    def ball_for(self, sensor: SensorCorrection | None = None
+    def ball_for(self, sensor: SensorCorrection | None = None,
+                 at: NDArray[np.intp] | None = None
                  ) -> tuple[FloatArray, FloatArray, FloatArray]:
         """World ball angle, its rate and the ball's distance under a sensor correction.
 
@@ -268,27 +273,41 @@ class Prepared:
         ``dL`` later than assumed shows the ball at ``t - dL``; the corrected signals at t
         are the smoothed ones at ``t + dL`` (linear interpolation of smooth signals).
 
+        Parameters
+        ----------
+        sensor : SensorCorrection, optional
+            The correction (none by default).
+        at : ndarray of int, optional
+            Grid indices: the signals there only (default: the whole grid).
+
         Returns
         -------
         psi_w, psi_w_dot, rho : ndarray
-            [rad], [rad/s], [m] on the grid (NaN outside ball segments).
+            [rad], [rad/s], [m] on the grid or at ``at`` (NaN outside ball segments).
         """
         sensor = sensor or SensorCorrection()
         psi, psid = self.psi_w, self.psi_w_dot
         rho = self.rho if self.rho is not None else np.full(self.n, np.nan)
         if sensor.has_offset and self.ball_xy is not None:
-            bx, by, bxd, byd = self.ball_xy
-            x, y = bx - sensor.offset_x, by - sensor.offset_y
-            rho = np.hypot(x, y)
-            psi = _world_angle(x, y)
-            psid = (y * bxd - x * byd) / (rho * rho)
+            key = (sensor.offset_x, sensor.offset_y)
+            if self._offset_view is not None and self._offset_view[0] == key:
+                psi, psid, rho = self._offset_view[1]  # a fit's columns mostly share it
+            else:
+                bx, by, bxd, byd = self.ball_xy
+                x, y = bx - sensor.offset_x, by - sensor.offset_y
+                rho = np.hypot(x, y)
+                psi = _world_angle(x, y)
+                psid = (y * bxd - x * byd) / (rho * rho)
+                for a in (psi, psid, rho):
+                    a.flags.writeable = False
+                self._offset_view = (key, (psi, psid, rho))
         if sensor.rotation != 0.0:
             psi = psi + sensor.rotation
         if sensor.scale != 1.0:
             rho = rho / sensor.scale
         if sensor.latency == 0.0:
-            return psi, psid, rho
-        ts = self.t + sensor.latency
+            return (psi, psid, rho) if at is None else (psi[at], psid[at], rho[at])
+        ts = self.t + sensor.latency if at is None else self.t[at] + sensor.latency
         return (np.interp(ts, self.t, psi), np.interp(ts, self.t, psid),
                 np.interp(ts, self.t, rho))
 
@@ -314,9 +333,14 @@ class Prepared:
         d = 0.0 if sensor is None else sensor.torque_delay
         if d == 0.0:
             return self.u
+        if self._u_shifted is not None and self._u_shifted[0] == d:
+            return self._u_shifted[1]  # a fit's evaluations mostly share the delay
         if self._u_spline is None:
             self._u_spline = _HeldSpline(self.t, self.u)
-        return self._u_spline(self.t - d)
+        u = self._u_spline(self.t - d)
+        u.flags.writeable = False
+        self._u_shifted = (d, u)
+        return u
 
 
 def _odd(n: float) -> int:

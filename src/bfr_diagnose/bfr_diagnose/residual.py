@@ -58,10 +58,12 @@ from bfr_model.dynamics import (
     joint_torque,
     mass_from_curve,
 )
-from bfr_model.jit import njit
+from bfr_model.geometry import offset_kernel
+from bfr_model.jit import njit, njit_parallel, prange
 from bfr_model.layout import (
     I_CV,
     I_CW,
+    I_EL,
     I_G,
     I_JF,
     I_KU,
@@ -91,19 +93,116 @@ __all__ = ["ROW_NAMES", "ROW_UNITS", "Residual", "ResidualConfig", "ResidualEval
 FloatArray = NDArray[np.float64]
 
 
+#: [rad] Largest Newton step after which the curve's terms are moved along by their Taylor
+#: series instead of evaluated anew (:func:`_sample_terms`).
+TAYLOR_STEP = 1e-6
+
+
 @njit
+def _sample_terms(th, thd, thdd, ps, psd, ph, P, R, rho0, orders, ccos, csin, bphi, bh,  # noqa: ANN001, ANN202
+                  bw):  # noqa: ANN001
+    """One sample of :func:`pointwise_terms`: its nine outputs, from Newton's start ``ph``.
+
+    A function of its own so that the parallel loop's body has no locals of its own (the
+    curve's terms of the last Newton step are used after the iteration's ``break``).
+
+    Newton on ``f(phi) = phi + wrap(atan2(p_x, p_y) - phi) - psi``. For a round ball, once a
+    step ``d`` is below :data:`TAYLOR_STEP` the curve's terms at ``phi + d`` are their
+    Taylor series from those at phi (:func:`bfr_model.geometry.offset_kernel` gives p to its
+    third derivative, ``p3``; ``p4`` is the fourth)::
+
+        p(phi + d)  = p + p1 d + p2 d^2 / 2 + p3 d^3 / 6    (error p4 d^4 / 24)
+        p1(phi + d) = p1 + p2 d + p3 d^2 / 2               (error p4 d^3 / 6)
+        p2(phi + d) = p2 + p3 d                            (error p4 d^2 / 2)
+
+    with ``lam = |p1|``, ``t = p1 / lam``, ``n = J t`` and ``lam' = p1 . p2 / lam`` from
+    them: at ``d = 1e-6`` and ``|p4| ~ 1 m`` (an 8th harmonic of 0.1 mm beside the seed's
+    contour) p2 is off by 5e-13 m, a relative 5e-12, below the Newton tolerance's own effect
+    (on fin's rows: 2e-11 of the ball row, against 2e-9 with a 1e-5 threshold, at the same
+    speed). ``f`` is then evaluated from the moved terms (exact to 1e-20 rad) and decides
+    convergence as before; a fit's next evaluation is mostly a step of 1e-10 to 1e-6 rad
+    from its last (:meth:`ResidualEvaluator._predicted`), so one curve evaluation per
+    sample replaces two.
+    """
+    m = P[I_M]
+    g = P[I_G]
+    cw = P[I_CW]
+    sw = P[I_SW]
+    round_ball = P[I_EL] == 0.0
+    # contact angle from the ball-centre angle (Newton on psi = phi + wrap(atan2 - phi))
+    for _ in range(8):
+        if round_ball:
+            px, py, p1x, p1y, p2x, p2y, p3x, p3y, nx, ny, lam, lam1, _k = offset_kernel(
+                ph, R, rho0, orders, ccos, csin, bphi, bh, bw)
+        else:
+            px, py, p1x, p1y, p2x, p2y, nx, ny, lam, lam1 = curve_terms(
+                ph, P, R, rho0, orders, ccos, csin, bphi, bh, bw)
+            p3x = 0.0
+            p3y = 0.0
+        r2 = px * px + py * py
+        f = ph + (np.mod(np.arctan2(px, py) - ph + np.pi, 2.0 * np.pi) - np.pi) - ps
+        dpsi = (py * p1x - px * p1y) / r2
+        if abs(f) < 1e-11:
+            break
+        d = -f / dpsi
+        ph = ph + d
+        if round_ball and abs(d) < TAYLOR_STEP:
+            d2 = 0.5 * d * d
+            d3 = d * d2 / 3.0
+            px = px + p1x * d + p2x * d2 + p3x * d3
+            py = py + p1y * d + p2y * d2 + p3y * d3
+            p1x = p1x + p2x * d + p3x * d2
+            p1y = p1y + p2y * d + p3y * d2
+            p2x = p2x + p3x * d
+            p2y = p2y + p3y * d
+            lam = np.sqrt(p1x * p1x + p1y * p1y)
+            nx = -p1y / lam
+            ny = p1x / lam
+            lam1 = (p1x * p2x + p1y * p2y) / lam
+            r2 = px * px + py * py
+            f = ph + (np.mod(np.arctan2(px, py) - ph + np.pi, 2.0 * np.pi) - np.pi) - ps
+            dpsi = (py * p1x - px * p1y) / r2
+            if abs(f) < 1e-11:
+                break
+    phd = psd / dpsi
+    # mass matrix, its phi-derivative and gravity: the model's own kernels
+    m11, m12, m22, dm11, dm12, dm22 = mass_from_curve(px, py, p1x, p1y, p2x, p2y, lam,
+                                                      lam1, P, R)
+    st = np.sin(th)
+    ct = np.cos(th)
+    g1, g2 = gravity_from_curve(st, ct, px, py, p1x, p1y, P)
+    g1 = g1 - frame_gravity(st, ct, P)  # the ball's weight only (the frame's: outside)
+    # normal force n3 . m (r_dd + g y) (bfr_model.dynamics.rigid_terms; the phi_dd term
+    # vanishes for a round ball: n . p' = 0)
+    thd2 = thd * thd
+    phd2 = phd * phd
+    cor = 2.0 * thd * phd
+    a0x = -thd2 * cw * px - cor * p1y + phd2 * cw * p2x + g * st
+    a0y = -thd2 * py + cor * cw * p1x + phd2 * p2y + g * ct
+    a0z = phd2 * sw * p2x
+    fn = (m * (cw * nx * a0x + ny * a0y + sw * nx * a0z)
+          + m * (-cw * nx * py + ny * cw * px) * thdd)
+    q2 = -P[I_MUR] * lam * np.tanh(phd / P[I_VR]) * fn
+    dtdphi = 0.5 * (dm11 * thd2 + 2.0 * dm12 * thd * phd + dm22 * phd2)
+    return ((m11 - P[I_JF]) * thd + m12 * phd, -g1, m12 * thd + m22 * phd,
+            q2 - g2 + dtdphi, ph, phd, fn, np.sqrt(px * px + py * py), dpsi)
+
+
+@njit_parallel
 def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatArray,
                     psi: FloatArray, psi_dot: FloatArray,
                     phi_guess: FloatArray, P: FloatArray, R: float, rho0: float,
                     orders: FloatArray, ccos: FloatArray, csin: FloatArray, bphi: FloatArray,
                     bh: FloatArray, bw: FloatArray) -> tuple:
-    """Momenta and force terms at each sample (module docstring), compiled loop.
+    """Momenta and force terms at each sample (module docstring), compiled.
 
-    One evaluation of the ball-centre curve per Newton step: the iteration stops when the
-    angle equation is solved to 1e-11 rad and the terms at that point are used directly. The
-    mass matrix, its derivative and the normal force are the same expressions as
-    :func:`bfr_model.dynamics.mass_terms` and :func:`bfr_model.dynamics.rigid_terms` (including
-    the frame's wobble factors), written inline.
+    The samples are independent: a parallel loop (``prange``) over :func:`_sample_terms`.
+    One evaluation of the ball-centre curve per Newton step (a small last step moves the
+    terms by their Taylor series instead): the iteration stops when the angle equation is
+    solved to 1e-11 rad and the terms at that point are used directly. The mass matrix, its
+    derivative and the normal force are the same expressions as
+    :func:`bfr_model.dynamics.mass_terms` and :func:`bfr_model.dynamics.rigid_terms`
+    (including the frame's wobble factors), written inline.
 
     The frame's own terms (its inertia, the drive, the joint, its weight) are left out of
     row 1 here: they do not depend on the ball, and :meth:`ResidualEvaluator.evaluate` adds
@@ -121,64 +220,13 @@ def pointwise_terms(theta: FloatArray, theta_dot: FloatArray, theta_ddot: FloatA
         ``d psi / d phi`` at the solution [-] (the next evaluation's predictor).
     """
     n = theta.shape[0]
-    pr_o = np.empty(n)
-    p1 = np.empty(n)
-    f1 = np.empty(n)
-    p2 = np.empty(n)
-    f2 = np.empty(n)
-    phi_o = np.empty(n)
-    phid_o = np.empty(n)
-    fn_o = np.empty(n)
-    dpsi_o = np.empty(n)
-    m = P[I_M]
-    g = P[I_G]
-    cw = P[I_CW]
-    sw = P[I_SW]
-    for i in range(n):
-        th = theta[i]
-        thd = theta_dot[i]
-        # contact angle from the ball-centre angle (Newton on psi = phi + wrap(atan2 - phi))
-        ps = psi[i]
-        ph = phi_guess[i]
-        for _ in range(8):
-            px, py, p1x, p1y, p2x, p2y, nx, ny, lam, lam1 = curve_terms(
-                ph, P, R, rho0, orders, ccos, csin, bphi, bh, bw)
-            r2 = px * px + py * py
-            f = ph + (np.mod(np.arctan2(px, py) - ph + np.pi, 2.0 * np.pi) - np.pi) - ps
-            dpsi = (py * p1x - px * p1y) / r2
-            if abs(f) < 1e-11:
-                break
-            ph = ph - f / dpsi
-        phd = psi_dot[i] / dpsi
-        # mass matrix, its phi-derivative and gravity: the model's own kernels
-        m11, m12, m22, dm11, dm12, dm22 = mass_from_curve(px, py, p1x, p1y, p2x, p2y, lam,
-                                                          lam1, P, R)
-        st = np.sin(th)
-        ct = np.cos(th)
-        g1, g2 = gravity_from_curve(st, ct, px, py, p1x, p1y, P)
-        g1 = g1 - frame_gravity(st, ct, P)  # the ball's weight only (the frame's: outside)
-        # normal force n3 . m (r_dd + g y) (bfr_model.dynamics.rigid_terms; the phi_dd term
-        # vanishes for a round ball: n . p' = 0)
-        thd2 = thd * thd
-        phd2 = phd * phd
-        cor = 2.0 * thd * phd
-        a0x = -thd2 * cw * px - cor * p1y + phd2 * cw * p2x + g * st
-        a0y = -thd2 * py + cor * cw * p1x + phd2 * p2y + g * ct
-        a0z = phd2 * sw * p2x
-        fn = (m * (cw * nx * a0x + ny * a0y + sw * nx * a0z)
-              + m * (-cw * nx * py + ny * cw * px) * theta_ddot[i])
-        q2 = -P[I_MUR] * lam * np.tanh(phd / P[I_VR]) * fn
-        dtdphi = 0.5 * (dm11 * thd2 + 2.0 * dm12 * thd * phd + dm22 * phd2)
-        p1[i] = (m11 - P[I_JF]) * thd + m12 * phd
-        p2[i] = m12 * thd + m22 * phd
-        f1[i] = -g1
-        f2[i] = q2 - g2 + dtdphi
-        phi_o[i] = ph
-        phid_o[i] = phd
-        fn_o[i] = fn
-        pr_o[i] = np.sqrt(px * px + py * py)
-        dpsi_o[i] = dpsi
-    return p1, f1, p2, f2, phi_o, phid_o, fn_o, pr_o, dpsi_o
+    out = np.empty((9, n))
+    for i in prange(n):
+        o = _sample_terms(theta[i], theta_dot[i], theta_ddot[i], psi[i], psi_dot[i],
+                          phi_guess[i], P, R, rho0, orders, ccos, csin, bphi, bh, bw)
+        for j in range(9):
+            out[j, i] = o[j]
+    return (out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7], out[8])
 
 
 def kernel_pair(J: int, dt: float) -> tuple[FloatArray, FloatArray]:
@@ -203,6 +251,10 @@ def kernel_pair(J: int, dt: float) -> tuple[FloatArray, FloatArray]:
 
 #: Entries of the kernel vector that the frame's own terms use (not the ball's).
 _FRAME_ENTRIES = (I_JF, I_CV, I_TC, I_VC, I_KU, I_MEX, I_MEY, I_TAU0)
+
+
+#: ... and every entry they read (gravity and the wobble factor are shared with the ball's).
+_FRAME_KEY = np.array([*_FRAME_ENTRIES, I_G, I_CW])
 
 
 def _ball_key(P: FloatArray) -> bytes:
@@ -334,6 +386,7 @@ class ResidualEvaluator:
         # (psi, phi, d psi / d phi) of the last evaluation: Newton's start (_predicted)
         self._last_solution: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._ball_cache: tuple | None = None  # the ball's terms of the last evaluation
+        self._frame_cache: tuple | None = None  # the frame's own terms of the last one
         self._model: RigidModel | None = None   # the last evaluation's model
 
     def _conv(self, x: FloatArray, kern: FloatArray) -> FloatArray:
@@ -378,9 +431,9 @@ class ResidualEvaluator:
         if self._ball_cache is not None and self._ball_cache[0] == key:
             ball = self._ball_cache[1]
         else:
-            psi_w, psi_wd, rho = prep.ball_for(sensor)
-            psi = th + psi_w[sel]
-            psid = prep.theta_dot[sel] + psi_wd[sel]
+            psi_w, psi_wd, rho = prep.ball_for(sensor, at=sel)
+            psi = th + psi_w
+            psid = prep.theta_dot[sel] + psi_wd
             guess = psi if self._last_solution is None else self._predicted(psi)
             p1b, f1b, p2, f2, phi, phid, fn, pr, dpsi = pointwise_terms(
                 th, prep.theta_dot[sel], prep.theta_ddot[sel], psi, psid, guess,
@@ -388,7 +441,7 @@ class ResidualEvaluator:
             if np.all(np.isfinite(phi)):
                 self._last_solution = (psi, phi, dpsi)
             r2 = self._conv(self._nodes(p2), self.kd) - self._conv(self._nodes(f2), self.k)
-            r3 = self._conv(self._nodes(rho[sel] - pr), self.k)
+            r3 = self._conv(self._nodes(rho - pr), self.k)
             ball = (self._conv(self._nodes(p1b), self.kd) - self._conv(self._nodes(f1b), self.k),
                     r2, r3, (phi, phid, fn))
             self._ball_cache = (key, ball)
@@ -396,10 +449,16 @@ class ResidualEvaluator:
         if prep.frame_held:  # the frame's row needs the unknown holding torque
             r1 = np.full(self._idx_s.size, np.nan)
         else:
-            thd = prep.theta_dot[sel]
-            q1 = joint_torque(u[sel], thd, P) - frame_gravity(np.sin(th), np.cos(th), P)
-            r1 = (r1b + self._conv(self._nodes(P[I_JF] * thd), self.kd)
-                  - self._conv(self._nodes(q1), self.k))
+            key = (P[_FRAME_KEY].tobytes(), sensor.torque_delay, sensor.theta_zero)
+            if self._frame_cache is not None and self._frame_cache[0] == key:
+                inertial, applied = self._frame_cache[1]  # a column of the ball's effects
+            else:
+                thd = prep.theta_dot[sel]
+                q1 = joint_torque(u[sel], thd, P) - frame_gravity(np.sin(th), np.cos(th), P)
+                inertial = self._conv(self._nodes(P[I_JF] * thd), self.kd)
+                applied = self._conv(self._nodes(q1), self.k)
+                self._frame_cache = (key, (inertial, applied))
+            r1 = r1b + inertial - applied
         return Residual(r1, r2, self.idx, grid=self._to_grid, nodes=grid_nodes, n=prep.n,
                         r3=r3)
 

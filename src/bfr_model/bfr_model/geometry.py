@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from bfr_model.jit import njit
+from bfr_model.jit import njit, njit_inline
 
 __all__ = ["ContourArrays", "OffsetCurve", "contour_kernel", "offset_kernel"]
 
@@ -75,11 +75,32 @@ class ContourArrays:
                 self.bump_phi, self.bump_h, self.bump_w)
 
 
+@njit_inline
+def _harmonic(r0, r1, r2, r3, r4, k, c, s, a, b):  # noqa: ANN001, ANN202
+    """Add ``a cos k phi + b sin k phi`` and its first four derivatives to ``r0..r4``.
+
+    ``c`` and ``s`` are the cosine and sine of ``k phi``.
+    """
+    return (r0 + a * c + b * s,
+            r1 + k * (-a * s + b * c),
+            r2 - k * k * (a * c + b * s),
+            r3 + k * k * k * (a * s - b * c),
+            r4 + k * k * k * k * (a * c + b * s))
+
+
+#: Integer orders up to this one take cos/sin k phi from the angle-addition recurrence.
+MAX_RECURRENCE_ORDER = 64
+
+
 @njit
 def contour_kernel(phi, rho0, orders, ccos, csin, bump_phi, bump_h, bump_w):  # noqa: ANN001, ANN201
     """Rho and its first four derivatives with respect to phi.
 
-    Works on a float or an array ``phi``. Bump derivatives use the Hermite polynomials:
+    Works on a float or an array ``phi``. When every order is an integer from 1 to
+    :data:`MAX_RECURRENCE_ORDER`, ``cos k phi`` and ``sin k phi`` come from ``cos phi`` and
+    ``sin phi`` by the angle-addition recurrence (two trigonometric calls instead of two per
+    order; the rounding grows as ``k eps``, 1e-14 at k = 64); other orders call them
+    directly. Bump derivatives use the Hermite polynomials:
     ``d^n/dd^n exp(-x^2/2) = (-1)^n He_n(x) exp(-x^2/2) / w^n``, ``x = d / w``.
     """
     z = 0.0 * phi
@@ -88,17 +109,30 @@ def contour_kernel(phi, rho0, orders, ccos, csin, bump_phi, bump_h, bump_w):  # 
     r2 = z
     r3 = z
     r4 = z
+    kmax = 0
+    integer = True
     for i in range(orders.shape[0]):
         k = orders[i]
-        c = np.cos(k * phi)
-        s = np.sin(k * phi)
-        a = ccos[i]
-        b = csin[i]
-        r0 = r0 + a * c + b * s
-        r1 = r1 + k * (-a * s + b * c)
-        r2 = r2 - k * k * (a * c + b * s)
-        r3 = r3 + k * k * k * (a * s - b * c)
-        r4 = r4 + k * k * k * k * (a * c + b * s)
+        if k < 1.0 or k > MAX_RECURRENCE_ORDER or k != np.floor(k):
+            integer = False
+        else:
+            kmax = max(kmax, int(k))
+    if integer:
+        c1 = np.cos(phi)
+        s1 = np.sin(phi)
+        ck = c1
+        sk = s1
+        for k in range(1, kmax + 1):
+            for i in range(orders.shape[0]):
+                if orders[i] == k:
+                    r0, r1, r2, r3, r4 = _harmonic(r0, r1, r2, r3, r4, orders[i], ck, sk,
+                                                   ccos[i], csin[i])
+            ck, sk = ck * c1 - sk * s1, sk * c1 + ck * s1
+    else:
+        for i in range(orders.shape[0]):
+            k = orders[i]
+            r0, r1, r2, r3, r4 = _harmonic(r0, r1, r2, r3, r4, k, np.cos(k * phi),
+                                           np.sin(k * phi), ccos[i], csin[i])
     for i in range(bump_phi.shape[0]):
         w = bump_w[i]
         d = np.mod(phi - bump_phi[i] + np.pi, 2.0 * np.pi) - np.pi
@@ -168,6 +202,23 @@ def offset_kernel(phi, R, rho0, orders, ccos, csin, bump_phi, bump_h, bump_w):  
     p3x = ct * tx + cn * nx
     p3y = ct * ty + cn * ny
     return px, py, p1x, p1y, p2x, p2y, p3x, p3y, nx, ny, lam, lam1, K
+
+
+@njit
+def _speed_extremes(n, R, rho0, orders, ccos, csin, bump_phi, bump_h, bump_w):  # noqa: ANN001, ANN202
+    """``(min lam, max |lam'|)`` over ``n`` equally spaced nodes of ``[0, 2 pi)``.
+
+    :func:`offset_kernel` node by node (no temporary arrays: the fits check every candidate
+    curve, :meth:`OffsetCurve.speed_floor`).
+    """
+    lam_min = np.inf
+    slope = 0.0
+    for j in range(n):
+        g = offset_kernel(2.0 * np.pi * j / n, R, rho0, orders, ccos, csin, bump_phi, bump_h,
+                          bump_w)
+        lam_min = min(lam_min, g[10])
+        slope = max(slope, abs(g[11]))
+    return lam_min, slope
 
 
 class OffsetCurve:
@@ -286,10 +337,10 @@ class OffsetCurve:
         w_min = float(np.min(np.abs(a.bump_w))) if a.bump_w.size else np.inf
         need = max(512.0, 16.0 * k_max, 16.0 * 2.0 * np.pi / w_min)
         n = int(min(n_max, 2 ** math.ceil(math.log2(need))))
-        g = self._eval(np.linspace(0.0, 2.0 * np.pi, n, endpoint=False))
-        floor = float(np.min(g[10]) - (2.0 * np.pi / n) * np.max(np.abs(g[11])))
+        lam_min, slope = _speed_extremes(n, *self._args)
+        floor = lam_min - (2.0 * np.pi / n) * slope
         if floor > 0.0 or n >= n_max:
-            return floor if floor > 0.0 else float(np.min(g[10]))
+            return floor if floor > 0.0 else lam_min
         return self.min_speed(n_max)
 
     def ball_angle(self, phi: ArrayLike) -> FloatArray:

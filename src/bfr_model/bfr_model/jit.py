@@ -38,3 +38,25 @@ def njit_inline(fn: F) -> F:
     if not JIT_ENABLED:
         return fn
     return _numba.njit(cache=True, inline="always")(fn)  # type: ignore[union-attr]
+
+
+def njit_parallel(fn: F) -> F:
+    """As :func:`njit`, with ``parallel=True``: ``prange`` loops run on numba's threads.
+
+    For loops over independent samples (each iteration writes only its own outputs). The
+    thread count is numba's (``NUMBA_NUM_THREADS``, all cores by default; a process pool
+    that is itself the parallelism sets it to 1). Uncompiled, ``prange`` is ``range``.
+    """
+    if not JIT_ENABLED:
+        return fn
+    return _numba.njit(cache=True, parallel=True)(fn)  # type: ignore[union-attr]
+
+
+def prange(*args: int) -> range:
+    """``numba.prange`` inside :func:`njit_parallel` kernels; ``range`` when uncompiled."""
+    return range(*args)
+
+
+if JIT_ENABLED:  # pragma: no cover - depends on the environment
+    prange = _numba.prange  # type: ignore[assignment,union-attr]
+

@@ -451,9 +451,24 @@ class RigParams:
         return 2.0 * cos_g ** (1.0 + self.contact.exponent) * k_h
 
     def replace(self, **changes: Any) -> RigParams:
-        """Return a copy with dotted-name changes, e.g. ``replace(**{"ball.mass": 3e-3})``."""
+        """Return a copy with dotted-name changes, e.g. ``replace(**{"ball.mass": 3e-3})``.
+
+        Scalars, and tuples of numbers that leave the lists in the form
+        :func:`params_from_dict` gives them (:func:`_canonical`: integer orders, float
+        amplitudes, no all-zero entries), are set by nested ``dataclasses.replace`` (every
+        ``__post_init__`` check still runs); anything else goes through the parameter
+        dictionary, which converts and drops zero entries (a fit's contour: 0.03 ms instead
+        of 0.4 ms).
+        """
         if changes and all(not isinstance(v, (list, tuple, dict)) for v in changes.values()):
             return _replace_scalars(self, changes)
+        if changes and all(_plain(v) for v in changes.values()):
+            try:
+                out = _replace_scalars(self, changes)
+            except ParameterError:
+                out = None  # e.g. an order 3.0, which the dictionary makes an integer
+            if out is not None and _canonical(out):
+                return out
         d = params_to_dict(self)
         for key, value in changes.items():
             node = d
@@ -466,6 +481,31 @@ class RigParams:
                 raise ParameterError(f"parameter {key}: unknown name {parts[-1]!r}")
             node[parts[-1]] = value
         return params_from_dict(d)
+
+
+def _plain(value: Any) -> bool:
+    """A scalar, or a tuple of plain numbers (no list, dict or nested tuple)."""
+    if isinstance(value, tuple):
+        return all(type(v) in (int, float) for v in value)
+    return not isinstance(value, (list, dict))
+
+
+def _canonical(params: RigParams) -> bool:
+    """Whether ``params`` is what :func:`params_from_dict` builds from its own dictionary.
+
+    Its lists are the normalised ones: integer harmonic orders with float amplitudes, no
+    harmonic whose amplitudes are both zero, no bump or asperity of zero height, asperity
+    edges not all zero.
+    """
+    c, t = params.frame.contour, params.track
+    floats = (*c.harmonic_cos, *c.harmonic_sin, *t.bump_phi, *t.bump_height, *t.bump_width,
+              *t.asperity_phi, *t.asperity_height, *t.asperity_width)
+    return (all(type(k) is int for k in c.harmonic_orders)
+            and all(type(v) is float for v in floats)
+            and all(a != 0.0 or b != 0.0 for a, b in zip(c.harmonic_cos, c.harmonic_sin,
+                                                         strict=False))
+            and all(h != 0.0 for h in (*t.bump_height, *t.asperity_height))
+            and not (t.asperity_edge and all(v == 0 for v in t.asperity_edge)))
 
 
 #: Smallest arc-length rate of each ball-centre curve checked (:meth:`RigParams.check_rigid`).
