@@ -17,12 +17,13 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 from bfr_diagnose.api import DiagnoseOptions, diagnose_recording, diagnose_recordings
 from bfr_diagnose.effects import EFFECT_NAMES
-from bfr_diagnose.identify import Fit, _corr_matrix, _covariance
+from bfr_diagnose.identify import RESOLVED_Z, Fit, _corr_matrix, _covariance, _degenerate
 from bfr_diagnose.synth import (
     LogConventions,
     SynthConfig,
@@ -108,6 +109,27 @@ def test_correlations_of_an_unconstrained_parameter_are_not_reported() -> None:
     np.testing.assert_allclose(c[:3, :3], a / np.outer(d, d), rtol=1e-12)
     np.testing.assert_array_equal(c[3], [0.0, 0.0, 0.0, 1.0])
     assert np.all(np.abs(c) <= 1.0)
+
+
+@pytest.mark.parametrize(("sigma_offset", "degenerate"), [(2e-6, False), (5e-5, True)])
+def test_correlated_parameters_are_degenerate_only_when_the_data_do_not_fix_them(
+        sigma_offset: float, degenerate: bool) -> None:
+    """A Coulomb friction and a torque offset correlate 0.999 when most of the recordings
+    turn one way; one run the other way fixes both: 1.0 mN m +- 1 uN m and -0.13 mN m +-
+    2 uN m (60 standard deviations from zero) are identified, the same offset +- 50 uN m
+    (2.5) is not."""
+    sigma_c, rho = 1e-6, 0.999
+    cov = np.array([[sigma_c ** 2, rho * sigma_c * sigma_offset],
+                    [rho * sigma_c * sigma_offset, sigma_offset ** 2]])
+    fit = Fit(effects=["joint_coulomb_friction", "torque_offset"],
+              values=[np.array([1e-3]), np.array([-1.3e-4])], sensors=[], cost_train=1.0,
+              cost_test=1.0, cov=cov, n_params=2)
+    base = RigParams()
+    assert base.joint.coulomb_friction == 0.0 and base.actuator.torque_offset == 0.0
+    why = _degenerate(SimpleNamespace(base=base), fit, 0.995)
+    assert (why is not None) == degenerate, why
+    if degenerate:
+        assert "correlate 0.999" in why and f"{RESOLVED_Z:g} needed" in why
 
 
 def test_a_parameter_the_data_do_not_fix_has_infinite_variance() -> None:

@@ -69,8 +69,11 @@ Every stage's figures are kept, so the ranking shows at which stage each effect 
 and what decided it.
 
 Degenerate fits. A joint fit in which a parameter runs to a bound that its nominal value is
-not at, or in which two parameters of different effects correlate beyond 0.995, is not
-identifiable from these recordings: never added, reported. Confounded pairs: a runner-up
+not at, or in which two parameters of different effects correlate beyond 0.995 while one of
+them lies within five of its marginal standard deviations of its nominal value, is not
+identifiable from these recordings: never added, reported. (Correlation alone is not the
+test: a Coulomb friction and a torque offset correlate 0.999 when most of the data turn one
+way, yet one run in the other direction fixes each of them to 1 %.) Confounded pairs: a runner-up
 that explains nearly as much as the winner and correlates beyond 0.9 with it (or adds
 nothing), and any physics parameter correlating beyond 0.9 with a sensor parameter (e.g.
 the contour's radius with the camera's scale), are reported instead of guessed.
@@ -1433,6 +1436,12 @@ def _offsets(fit: Fit) -> FloatArray:
     return np.concatenate([[0], np.cumsum([EFFECTS[n].k for n in fit.effects])]).astype(int)
 
 
+#: [-] Two parameters of different effects that correlate beyond ``degenerate_corr`` are
+#: still identified when each lies this many marginal standard deviations (their
+#: correlation included) from its nominal value (:func:`_degenerate`).
+RESOLVED_Z = 5.0
+
+
 def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
     """Why a joint fit is not identifiable, or None (see :func:`select_effects`)."""
     if not fit.ok:
@@ -1458,13 +1467,36 @@ def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
     corr = _corr_matrix(fit)
     if corr is not None and len(fit.effects) > 1:
         offs = _offsets(fit)
+        z = _resolution(prob, fit)
         for i, a in enumerate(fit.effects):
             for j in range(i + 1, len(fit.effects)):
                 block = corr[offs[i]:offs[i + 1], offs[j]:offs[j + 1]]
-                rho = float(np.max(np.abs(block))) if block.size else 0.0
-                if np.isfinite(rho) and rho > max_corr:
-                    return f"{a} and {fit.effects[j]} correlate {rho:.3f}"
+                if not block.size:
+                    continue
+                p, q = np.unravel_index(int(np.argmax(np.abs(block))), block.shape)
+                rho = float(abs(block[p, q]))
+                if not (np.isfinite(rho) and rho > max_corr):
+                    continue
+                zp, zq = z[offs[i] + p], z[offs[j] + q]
+                if min(zp, zq) >= RESOLVED_Z:
+                    continue  # they move together, but the data fix each one apart
+                return (f"{a} and {fit.effects[j]} correlate {rho:.3f} (resolved to "
+                        f"{min(zp, zq):.1f} standard deviations; {RESOLVED_Z:g} needed)")
     return None
+
+
+def _resolution(prob: Problem, fit: Fit) -> FloatArray:
+    """Each effect parameter's distance from its nominal in marginal standard deviations.
+
+    ``|v - v_0| / sigma`` from the fit's covariance (0 where the variance is not finite).
+    """
+    vals = np.concatenate([np.asarray(v, float) for v in fit.values])
+    nominal = np.concatenate([np.asarray(EFFECTS[n].start(prob.base), float)
+                              for n in fit.effects])
+    var = np.diag(fit.cov)[:vals.size] if fit.cov is not None else np.full(vals.size, np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = np.abs(vals - nominal) / np.sqrt(var)
+    return np.where(np.isfinite(z) & (var > 0.0), z, 0.0)
 
 
 def _corr_between(fit: Fit, a: str, b: str) -> float:
