@@ -53,6 +53,7 @@ import numpy as np
 from bfr_model.io import read_recording
 from bfr_model.io.bag import write_recording_bag
 from bfr_model.io.rig_log import parse_rig_log, write_rig_log
+from bfr_model.jit import use_one_thread
 from bfr_model.params import RigParams, load_params
 from bfr_model.recording import Recording
 
@@ -561,7 +562,8 @@ def main(argv: list[str] | None = None) -> int:
             f"{'+'.join(r['found']) or 'none'} ({'exact' if r['exact'] else 'NOT exact'})")
 
     if args.workers > 1 and len(jobs) > 1:
-        with mp.get_context("fork").Pool(args.workers) as pool:
+        # forked before this process ran a parallel kernel; one numba thread per worker
+        with mp.get_context("fork").Pool(args.workers, initializer=use_one_thread) as pool:
             for r in pool.imap_unordered(run_case, jobs):
                 report(r)
     else:

@@ -45,11 +45,24 @@ def njit_parallel(fn: F) -> F:
 
     For loops over independent samples (each iteration writes only its own outputs). The
     thread count is numba's (``NUMBA_NUM_THREADS``, all cores by default; a process pool
-    that is itself the parallelism sets it to 1). Uncompiled, ``prange`` is ``range``.
+    that is itself the parallelism sets it to 1: :func:`use_one_thread`, or the variable in
+    the workers' environment). A pool that forks must do so before the parent has run a
+    parallel kernel (GNU OpenMP's threads do not survive a fork). Uncompiled, ``prange`` is
+    ``range``.
     """
     if not JIT_ENABLED:
         return fn
     return _numba.njit(cache=True, parallel=True)(fn)  # type: ignore[union-attr]
+
+
+def use_one_thread() -> None:
+    """Run this process's :func:`njit_parallel` kernels on one thread.
+
+    For the workers of a process pool, which is itself the parallelism (numba's OpenMP
+    threads in every worker would oversubscribe the cores). Nothing without numba.
+    """
+    if JIT_ENABLED:
+        _numba.set_num_threads(1)  # type: ignore[union-attr]
 
 
 def prange(*args: int) -> range:
