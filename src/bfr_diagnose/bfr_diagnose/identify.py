@@ -1471,17 +1471,15 @@ def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
         for i, a in enumerate(fit.effects):
             for j in range(i + 1, len(fit.effects)):
                 block = corr[offs[i]:offs[i + 1], offs[j]:offs[j + 1]]
-                if not block.size:
-                    continue
-                p, q = np.unravel_index(int(np.argmax(np.abs(block))), block.shape)
-                rho = float(abs(block[p, q]))
-                if not (np.isfinite(rho) and rho > max_corr):
-                    continue
-                zp, zq = z[offs[i] + p], z[offs[j] + q]
-                if min(zp, zq) >= RESOLVED_Z:
-                    continue  # they move together, but the data fix each one apart
-                return (f"{a} and {fit.effects[j]} correlate {rho:.3f} (resolved to "
-                        f"{min(zp, zq):.1f} standard deviations; {RESOLVED_Z:g} needed)")
+                for p, q in zip(*np.nonzero(np.abs(block) > max_corr), strict=True):
+                    rho = float(abs(block[p, q]))
+                    if not np.isfinite(rho):
+                        continue
+                    zpq = min(z[offs[i] + p], z[offs[j] + q])
+                    if zpq >= RESOLVED_Z:
+                        continue  # they move together, but the data fix each one apart
+                    return (f"{a} and {fit.effects[j]} correlate {rho:.3f} (resolved to "
+                            f"{zpq:.1f} standard deviations; {RESOLVED_Z:g} needed)")
     return None
 
 

@@ -72,4 +72,3 @@ def prange(*args: int) -> range:
 
 if JIT_ENABLED:  # pragma: no cover - depends on the environment
     prange = _numba.prange  # type: ignore[assignment,union-attr]
-

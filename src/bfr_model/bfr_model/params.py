@@ -457,8 +457,8 @@ class RigParams:
         :func:`params_from_dict` gives them (:func:`_canonical`: integer orders, float
         amplitudes, no all-zero entries), are set by nested ``dataclasses.replace`` (every
         ``__post_init__`` check still runs); anything else goes through the parameter
-        dictionary, which converts and drops zero entries (a fit's contour: 0.03 ms instead
-        of 0.4 ms).
+        dictionary, which converts and drops zero entries (a fit's 14 harmonics: 0.03 ms
+        instead of 0.09 ms, the curve's rigid check aside).
         """
         if changes and all(not isinstance(v, (list, tuple, dict)) for v in changes.values()):
             return _replace_scalars(self, changes)
