@@ -21,9 +21,15 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from bfr_diagnose.api import DiagnoseOptions, diagnose_recording, diagnose_recordings
+from bfr_diagnose.api import (
+    DiagnoseOptions,
+    diagnose_recording,
+    diagnose_recordings,
+    held_out_block,
+)
 from bfr_diagnose.effects import EFFECT_NAMES
 from bfr_diagnose.identify import RESOLVED_Z, Fit, _corr_matrix, _covariance, _degenerate
+from bfr_diagnose.preprocess import Prepared
 from bfr_diagnose.synth import (
     LogConventions,
     SynthConfig,
@@ -453,3 +459,24 @@ def test_real_friction_runs_both_directions_one_rig() -> None:
     assert per and all(not p["used"] and p["degenerate"] for p in per)
     # ... and so has no interval (the curvature at a degenerate optimum is no spread)
     assert all(p["ci95"] == [None, None] for p in per)
+
+
+@pytest.mark.parametrize(("rate", "duration", "held", "want"), [
+    (2.6, 10.0, False, 2.0 * math.pi / 2.6),   # one turn, not the default 1.25 s (half)
+    (1.0, 30.0, False, 2.0 * math.pi),         # a friction run: one turn of 6.3 s
+    (8.0, 40.0, False, 6 * 2.0 * math.pi / 8.0),  # the default 5 s is nearest to 6 turns
+    (0.3, 10.0, False, 1.25),                  # half a turn in the run: the default
+    (2.6, 10.0, True, 1.25),                   # a held frame: the default
+])
+def test_held_out_blocks_cover_whole_frame_turns(rate: float, duration: float, held: bool,
+                                                 want: float) -> None:
+    """Training and held-out blocks of half a turn see opposite signs of a once-per-turn
+    torque (an imbalance 19x its floor was rejected so): a turning frame gets blocks of
+    whole turns, near an eighth of the run, at least two of each kind."""
+    t = np.arange(0.0, duration, 2e-3)
+    theta_dot = rate * (1.0 + 0.8 * np.sin(2.0 * np.pi * 0.7 * t))  # reverses now and then
+    zeros, ok = np.zeros(t.size), np.ones(t.size, bool)
+    prep = Prepared(t=t, theta=np.cumsum(theta_dot) * 2e-3, theta_dot=theta_dot,
+                    theta_ddot=zeros, u=zeros, psi_w=zeros, psi_w_dot=zeros, ball_ok=ok,
+                    frame_ok=ok, has_ball=True, latency0=0.0, frame_held=held)
+    assert held_out_block(prep, duration) == pytest.approx(want, rel=2e-3)

@@ -14,7 +14,8 @@ iteratively reweighted least squares, the weights frozen within a stage). The ba
 divided by the candidate's ball mass over the nominal one: that row is homogeneous in the
 ball's mass and inertia, so a lighter ball would otherwise shrink any misfit of it (a
 trivial solution). Alternating time blocks of
-``block`` seconds of each part are training and held-out data. Fits are bounded nonlinear
+``block`` seconds of each part are training and held-out data (whole frame turns when the
+frame turns on: :func:`bfr_diagnose.api.held_out_block`). Fits are bounded nonlinear
 least squares on the training blocks (``scipy.optimize.least_squares``, trust-region
 reflective) with a Jacobian that evaluates only the parts a column touches.
 
