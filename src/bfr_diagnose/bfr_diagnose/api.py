@@ -204,7 +204,7 @@ def held_out_block(prep: Prepared, dur: float) -> float:
     -43) and worse on the held-out ones (docs/notes/issue-14.md).
     """
     base = float(np.clip(dur / 8.0, 1.0, 5.0))
-    ok = prep.ball_ok if prep.has_ball else prep.frame_ok
+    ok = prep.usable
     if prep.frame_held or not np.any(ok):
         return base
     mean = abs(float(np.mean(prep.theta_dot[ok])))
@@ -312,7 +312,7 @@ def _parts(recordings: list[tuple[str, list[Recording]]], opts: DiagnoseOptions,
                 notes.append(f"{name} ({kind}): too few usable samples ({ev.idx.size}); "
                              "not used")
                 continue
-            dur = float(np.sum(prep.ball_ok if prep.has_ball else prep.frame_ok)
+            dur = float(np.sum(prep.usable)
                         * (prep.t[1] - prep.t[0]))
             block = opts.block or held_out_block(prep, dur)
             label = name if len(plan) == 1 else f"{name} [{kind}]"

@@ -386,7 +386,7 @@ def _predictor(prep: Prepared, params: RigParams, sensor: SensorCorrection | Non
                       nh=max(round(horizon / dt), 1), step=max(round(every / dt), 1),
                       theta=prep.theta + sensor.theta_zero, psi_w=psi_w, rho=rho,
                       u=prep.u_for(sensor),
-                      usable=prep.ball_ok if prep.has_ball else prep.frame_ok)
+                      usable=prep.usable)
 
 
 class _Scores:

@@ -263,6 +263,11 @@ class Prepared:
         """Number of grid samples."""
         return int(self.t.size)
 
+    @property
+    def usable(self) -> NDArray[np.bool_]:
+        """The samples the analysis uses: ``ball_ok`` with a ball, else ``frame_ok``."""
+        return self.ball_ok if self.has_ball else self.frame_ok
+
     def ball_for(self, sensor: SensorCorrection | None = None,
                  at: NDArray[np.intp] | None = None
                  ) -> tuple[FloatArray, FloatArray, FloatArray]:

@@ -364,7 +364,7 @@ class ResidualEvaluator:
         dt = float(prep.t[1] - prep.t[0])
         q = max(int(self.cfg.quad_step), 1)
         h = q * dt
-        ok = prep.ball_ok if prep.has_ball else prep.frame_ok
+        ok = prep.usable
         self.half_width = usable_half_width(ok, dt, self.cfg.half_width)
         J = max(round(self.half_width / h), 2)
         self.k, self.kd = kernel_pair(J, h)

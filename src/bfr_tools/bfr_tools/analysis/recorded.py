@@ -118,7 +118,7 @@ def recorded_states(prep: Prepared, params: RigParams, min_len: int = 50) -> Rec
     model's curve (module docstring). Without: ``prep.frame_ok``, phi = phi_dot = 0. Segments
     shorter than ``min_len`` samples are left out.
     """
-    mask = prep.ball_ok if prep.has_ball else prep.frame_ok
+    mask = prep.usable
     curve = RigidModel(params).curve
     out = []
     for i0, i1 in segments_from_mask(mask):
