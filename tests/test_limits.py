@@ -14,7 +14,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bfr_diagnose.blindtest import CONTACT_EFFECTS
-from bfr_diagnose.effects import EFFECT_NAMES, effect_size
+from bfr_diagnose.effects import (
+    BALL_INERTIA_RATIO,
+    EFFECT_NAMES,
+    effect_size,
+    possible_ball_inertia,
+)
 from bfr_diagnose.limits import cli, peer, stats
 from bfr_diagnose.limits.cases import FLOOR, draw_case
 from bfr_diagnose.limits.runner import done_indices, run_cases
@@ -53,6 +58,29 @@ def test_draw_reproducible_case_by_case_with_the_sizes_it_claims() -> None:
     again = draw_case(1, 137, base)
     assert again == cases[137]
     assert draw_case(2, 137, base) != cases[137]
+
+
+def test_ball_inertia_drawn_as_a_real_ball_can_be() -> None:
+    """No draw is a ball with more inertia than a thin shell of its mass and radius."""
+    base = load_params()
+    mr2 = base.ball.mass * base.ball.radius ** 2
+    lo, hi = BALL_INERTIA_RATIO
+    assert hi == pytest.approx(2.0 / 3.0)
+    # the seed's ball is (nearly) a thin shell: a heavier inertia is mirrored to a lighter one
+    assert possible_ball_inertia(base, 0.1) == pytest.approx(base.ball.inertia * 0.9)
+    assert possible_ball_inertia(base, -0.1) == pytest.approx(base.ball.inertia * 0.9)
+    assert possible_ball_inertia(base, 0.001) == pytest.approx(base.ball.inertia * 1.001)
+    assert possible_ball_inertia(base, 0.9) == pytest.approx(hi * mr2)   # neither: clipped
+    # a ball halfway between solid and shell takes either sign as drawn
+    mid = base.replace(**{"ball.inertia": 0.5 * mr2})
+    assert possible_ball_inertia(mid, 0.1) == pytest.approx(0.55 * mr2)
+    assert possible_ball_inertia(mid, -0.1) == pytest.approx(0.45 * mr2)
+    ratios = [c.truth["ball_inertia"][0] / mr2 for c in (draw_case(1, i, base)
+                                                          for i in range(400))
+              if "ball_inertia" in c.effects]
+    assert len(ratios) > 10
+    assert all(lo - 1e-12 <= r <= hi + 1e-12 for r in ratios)
+    assert min(ratios) < 0.6                     # large changes are drawn, as lighter shells
 
 
 def test_wilson_interval_known_values() -> None:

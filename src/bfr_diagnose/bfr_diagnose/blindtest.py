@@ -58,7 +58,14 @@ from bfr_model.params import RigParams, load_params
 from bfr_model.recording import Recording
 
 from bfr_diagnose.api import DiagnoseOptions, diagnose_recording
-from bfr_diagnose.effects import EFFECT_NAMES, EFFECTS, SHAPE_ORDERS, param_value, shape_truth
+from bfr_diagnose.effects import (
+    EFFECT_NAMES,
+    EFFECTS,
+    SHAPE_ORDERS,
+    param_value,
+    possible_ball_inertia,
+    shape_truth,
+)
 from bfr_diagnose.synth import (
     LogConventions,
     SynthConfig,
@@ -157,8 +164,9 @@ def _draw_effect(name: str, base: RigParams, rng: np.random.Generator, scale: fl
            "ball_inertia": ("ball.inertia", 0.05, 0.15)}
     if name in rel:
         key, lo, hi = rel[name]
-        nom = param_value(base, key)
-        v = nom * (1.0 + sign * mag(lo, hi))
+        change = sign * mag(lo, hi)
+        v = (possible_ball_inertia(base, change) if name == "ball_inertia"
+             else param_value(base, key) * (1.0 + change))
         return {key: v}, [v]
     if name == "ball_mass":
         v = base.ball.mass * (1.0 + sign * mag(0.06, 0.15))

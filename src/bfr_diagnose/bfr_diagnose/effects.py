@@ -69,10 +69,11 @@ from bfr_model.params import RigParams
 
 from bfr_diagnose.preprocess import SensorCorrection
 
-__all__ = ["CAMERA_PRIOR", "DESTINATION", "EFFECTS", "EFFECT_NAMES", "FRAME_ONLY_EFFECTS",
-           "MIN_SIZE", "SENSOR_PARAMS", "SHAPE_ORDERS", "Effect", "SensorParam", "apply_effects",
-           "display_values", "effect_size", "param_value", "plausibility", "sensor_correction",
-           "sensor_names_for", "shape_truth"]
+__all__ = ["BALL_INERTIA_RATIO", "CAMERA_PRIOR", "DESTINATION", "EFFECTS", "EFFECT_NAMES",
+           "FRAME_ONLY_EFFECTS", "MIN_SIZE", "SENSOR_PARAMS", "SHAPE_ORDERS", "Effect",
+           "SensorParam", "apply_effects", "display_values", "effect_size", "param_value",
+           "plausibility", "possible_ball_inertia", "sensor_correction", "sensor_names_for",
+           "shape_truth"]
 
 #: Contour harmonic orders fitted by ``frame_shape`` (k = 1: frame off-centre on the shaft;
 #: k = 2 is ``frame_contour``'s b; a sin 2 phi term is a turn of the contour, i.e. the
@@ -316,6 +317,28 @@ def effect_size(name: str, values: np.ndarray, base: RigParams) -> float:
     if name in ("frame_inertia", "ball_mass", "torque_gain", "ball_inertia"):
         return float(abs(v[0] / v0[0] - 1.0))
     return float(abs(v[0] - v0[0]))
+
+
+#: [-] The ball's inertia over ``m_b R_b^2`` that a ball can have: a solid sphere 2/5, a thin
+#: shell 2/3 (all of its mass at its radius: no ball of that mass and radius has more).
+BALL_INERTIA_RATIO = (0.4, 2.0 / 3.0)
+
+
+def possible_ball_inertia(base: RigParams, rel: float) -> float:
+    """The nominal ball inertia changed by the relative amount ``rel``, as a real ball can be.
+
+    ``J_b = J_b0 (1 + rel)``; where that is outside :data:`BALL_INERTIA_RATIO` times
+    ``m_b R_b^2`` the change is mirrored (``1 - rel``), and clipped to the range if both are
+    outside. The seed's ball is a thin shell (``J_b0`` = 0.663 ``m_b R_b^2``), so a heavier
+    inertia is a ball that cannot exist (the shell's thickness can only lower it): blind tests
+    draw their ball inertia through this, not beyond what any ball could be.
+    """
+    b = base.ball
+    lo, hi = (r * b.mass * b.radius ** 2 for r in BALL_INERTIA_RATIO)
+    for v in (b.inertia * (1.0 + rel), b.inertia * (1.0 - rel)):
+        if lo <= v <= hi:
+            return float(v)
+    return float(np.clip(b.inertia * (1.0 + rel), lo, hi))
 
 
 def plausibility(name: str, values: np.ndarray, base: RigParams) -> str | None:

@@ -32,7 +32,14 @@ import numpy as np
 from bfr_model.params import RigParams
 
 from bfr_diagnose.blindtest import CONTACT_EFFECTS, SensorDraw, draw_sensors
-from bfr_diagnose.effects import EFFECT_NAMES, MIN_SIZE, SHAPE_ORDERS, param_value, shape_truth
+from bfr_diagnose.effects import (
+    EFFECT_NAMES,
+    MIN_SIZE,
+    SHAPE_ORDERS,
+    param_value,
+    possible_ball_inertia,
+    shape_truth,
+)
 
 __all__ = ["FLOOR", "GAIN_SCALES", "KIND_PATTERN", "ORBIT_SPEEDS", "SCALAR_EFFECTS", "LimitCase",
            "draw_case", "effect_changes"]
@@ -113,7 +120,8 @@ def effect_changes(name: str, size: float, base: RigParams, rng: np.random.Gener
     rolling resistance and the groove; relative for frame inertia, torque gain, ball mass and
     inertia; the bump's height; the largest contour change; the imbalance moment's norm.
     Friction and rolling resistance only grow (they cannot be negative); the others take a
-    random sign.
+    random sign, the ball's inertia the one a real ball can have
+    (:func:`~bfr_diagnose.effects.possible_ball_inertia`: the seed's ball is a thin shell).
     """
     if name in ("joint_coulomb_friction", "joint_viscous_friction", "rolling_resistance",
                 "torque_offset"):
@@ -123,9 +131,11 @@ def effect_changes(name: str, size: float, base: RigParams, rng: np.random.Gener
                "torque_offset": "actuator.torque_offset"}[name]
         v = param_value(base, key) + (_sign(rng) if name == "torque_offset" else 1.0) * size
         return {key: v}, [v]
-    if name in ("frame_inertia", "torque_gain", "ball_inertia"):
-        key = {"frame_inertia": "frame.inertia", "torque_gain": "actuator.torque_gain",
-               "ball_inertia": "ball.inertia"}[name]
+    if name == "ball_inertia":
+        v = possible_ball_inertia(base, _sign(rng) * size)
+        return {"ball.inertia": v}, [v]
+    if name in ("frame_inertia", "torque_gain"):
+        key = {"frame_inertia": "frame.inertia", "torque_gain": "actuator.torque_gain"}[name]
         v = param_value(base, key) * (1.0 + _sign(rng) * size)
         return {key: v}, [v]
     if name == "ball_mass":
