@@ -13,7 +13,11 @@ and each sample weighted by Huber's weight at the stage's residual (:meth:`Probl
 iteratively reweighted least squares, the weights frozen within a stage). The ball row is
 divided by the candidate's ball mass over the nominal one: that row is homogeneous in the
 ball's mass and inertia, so a lighter ball would otherwise shrink any misfit of it (a
-trivial solution). Alternating time blocks of
+trivial solution). The frame row likewise by the candidate's torque gain over the nominal
+one: it is homogeneous in every torque and inertia it holds (``J_f``, ``k_u``, the ball's
+mass, the friction, offset and imbalance), so a smaller gain with all of them scaled with it
+shrank the row's misfit (limits case 449: a frame inertia +14 % taken for a torque gain
+0.88 and a ball mass 0.87 x, whose frame row was 0.88 of the truth's). Alternating time blocks of
 ``block`` seconds of each part are training and held-out data (whole frame turns when the
 frame turns on: :func:`bfr_diagnose.api.held_out_block`). Fits are bounded nonlinear
 least squares on the training blocks (``scipy.optimize.least_squares``, trust-region
@@ -63,16 +67,25 @@ when one recording's linearised gain reaches half its threshold (:func:`_screen_
 Selection, greedy forward. Stage 0 fits the sensor model alone. At each stage every
 candidate gets one Gauss-Newton step on top of the chosen effects with the sensor model
 refitted with it (the linearised screening: the least-squares fit of the candidate's and
-the sensors' Jacobian columns together); the three best and any within half of its
-threshold are then fitted fully, jointly with the chosen effects and the sensors. Of the
-significant ones (a plausible one before a suspect) the one with the strongest evidence, the
-lowest dBIC, is added; it stops when nothing is significant or after ``max_effects``. Not
-the largest held-out gain: while two effects are missing, a flexible one (fourteen contour
-harmonics) takes a share of the other's residual too and out-gains the true one, which the
-BIC's ``k ln N_eff`` charges for (blind case 6: a bump's dBIC -68 against the harmonics'
--63, their gains 0.60 against 0.75; taken by gain, the bump was then fitted 0.3 rad away).
+the sensors' Jacobian columns together); the two best (``screen_top``) and any within half
+of its threshold are then fitted fully, jointly with the chosen effects and the sensors. Of
+the significant ones (a plausible one before a suspect) the one with the strongest evidence,
+the lowest dBIC (its group's for an effect the group test made significant), is added; it
+stops when nothing is significant or after ``max_effects``. Not the largest held-out gain:
+while two effects are missing, a flexible one (fourteen contour harmonics) takes a share of
+the other's residual too and out-gains the true one, which the BIC's ``k ln N_eff`` charges
+for (blind case 6: a bump's dBIC -68 against the harmonics' -63, their gains 0.60 against
+0.75; taken by gain, the bump was then fitted 0.3 rad away).
 Every stage's figures are kept, so the ranking shows at which stage each effect was selected
 and what decided it.
+
+Parsimony (:func:`_simplify`). Greedy stages can take a stand-in and later a second effect
+that completes it: the frame row is unchanged by ``(J_f, k_u, m_b) -> (J_f, k_u, m_b) / s``
+(the ball's row is homogeneous in its mass), so a frame inertia is a torque gain plus a ball
+mass. After the last stage, each reported confounded partner ``c`` of a chosen ``a`` is tried
+in place of ``a`` and one other chosen ``b``; the smaller set is taken when its BIC is lower,
+the larger one's held-out cost is not lower by ``b``'s threshold, and ``c`` is plausible,
+above its floor and not degenerate. Reported (kind ``replaced``).
 
 Degenerate fits. A joint fit in which a parameter runs to a bound that its nominal value is
 not at, or in which two parameters of different effects correlate beyond 0.995 while one of
@@ -219,17 +232,20 @@ class Part:
         """Whether the effect enters one of this part's rows."""
         return any(r in self.rows for r in eff.rows)
 
-    def scaled(self, params: RigParams, sensor: SensorCorrection, m_ref: float
-               ) -> FloatArray:
+    def scaled(self, params: RigParams, sensor: SensorCorrection, m_ref: float,
+               k_ref: float) -> FloatArray:
         """The part's rows in their units, shape ``(len(rows), n)``.
 
-        The ball row times ``m_ref / m_b`` (module docstring: cost).
+        The frame row times ``k_ref / k_u``, the ball row times ``m_ref / m_b`` (module
+        docstring: cost).
         """
         res = self.ev.evaluate(params, sensor)
         out = []
         for r in self.rows:
             row = res.rows[r - 1]
-            if r == 2:
+            if r == 1:
+                row = row * (k_ref / params.actuator.torque_gain)
+            elif r == 2:
                 row = row * (m_ref / params.ball.mass)
             out.append(row)
         return np.vstack(out)
@@ -239,10 +255,10 @@ class Part:
         h = 1.0 if self.huber is None else self.huber[r - 1]
         return h / self.sigma[r - 1]
 
-    def weighted(self, params: RigParams, sensor: SensorCorrection, m_ref: float
-                 ) -> FloatArray:
+    def weighted(self, params: RigParams, sensor: SensorCorrection, m_ref: float,
+                 k_ref: float) -> FloatArray:
         """The part's weighted rows, shape ``(len(rows), n)`` (module docstring: cost)."""
-        x = self.scaled(params, sensor, m_ref)
+        x = self.scaled(params, sensor, m_ref, k_ref)
         return np.vstack([x[j] * self.row_weight(r) for j, r in enumerate(self.rows)])
 
 
@@ -329,6 +345,7 @@ class Problem:
         self.prior_scale = prior_scale
         self.prior_tau = 1.0     # [samples] the residual's correlation (module docstring)
         self.m_ref = base.ball.mass
+        self.k_ref = base.actuator.torque_gain
         self.n_eval = 0
         self._jac_cache: dict[tuple, Any] = {}
         # effect values -> (params, sensor correction) of apply_effects (:meth:`_model`)
@@ -447,12 +464,12 @@ class Problem:
     def part_weighted(self, i: int, chosen: Chosen, sensor: FloatArray) -> FloatArray:
         """Part ``i``'s weighted rows, raveled."""
         params, corr = self._model(i, chosen, sensor)
-        return self.parts[i].weighted(params, corr, self.m_ref).ravel()
+        return self.parts[i].weighted(params, corr, self.m_ref, self.k_ref).ravel()
 
     def part_scaled(self, i: int, chosen: Chosen, sensor: FloatArray) -> FloatArray:
         """Part ``i``'s rows in their units, shape ``(len(rows), n)`` (:meth:`Part.scaled`)."""
         params, corr = self._model(i, chosen, sensor)
-        return self.parts[i].scaled(params, corr, self.m_ref)
+        return self.parts[i].scaled(params, corr, self.m_ref, self.k_ref)
 
     def weighted(self, chosen: Chosen, sensors: list[FloatArray]) -> FloatArray:
         """All parts' weighted rows, concatenated (the cost's residual vector)."""
@@ -1096,7 +1113,7 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
         # a plausible explanation before a suspect (a fit outside its plausibility range
         # stands in for something else; a plausible one that is significant is preferred)
         plausible = [r for r in sig if r["plausible"]]
-        best = min(plausible or sig, key=lambda r: r["dbic"])
+        best = min(plausible or sig, key=_evidence)
         best["selected"] = True
         _note_confounds(prob, confounded, st, rows, best, fits[best["effect"]],
                         crit.confound_corr)
@@ -1107,6 +1124,7 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
     # the final model refitted with weights from its own residual: its intervals (and its
     # sensors') rest on the residual it leaves, not on the stage's weights
     chosen, sensors = _refit(prob, chosen, sensors)
+    chosen, sensors = _simplify(prob, chosen, sensors, confounded, crit, tau_noise, progress)
     final = (prob.fit(chosen[:-1], chosen[-1][0], chosen[-1][1], sensors) if chosen
              else prob.fit([], None, None, sensors))
     chosen, sensors = final.chosen(), final.sensors
@@ -1121,6 +1139,69 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
                               for p, s in zip(prob.parts, final.sensors, strict=True)],
                      parameters=parameter_table(final, tau),
                      sensor_table=sensor_table(prob, final, tau))
+
+
+def _simplify(prob: Problem, chosen: Chosen, sensors: list[FloatArray],
+              confounded: list[dict[str, Any]], crit: _Criteria, tau_noise: float,
+              progress: Any = None) -> tuple[Chosen, list[FloatArray]]:
+    """Two chosen effects replaced by one, a reported partner of either, where that is better.
+
+    Module docstring (selection, parsimony). The chosen set ``S`` against ``S' = S - {a, b} +
+    {c}`` for every reported confounded pair ``(a, c)`` with ``a`` chosen and ``c`` not, and
+    every other chosen ``b``: ``S'`` is taken when its BIC is lower (``dBIC(S -> S') < 0`` with
+    ``k_c - k_a - k_b`` parameters), ``S``'s held-out cost is not lower than ``S'``'s by the
+    threshold ``b`` had to beat, and ``c``'s fit is plausible and not degenerate. The
+    reparametrisation it finds: the frame row ``J_f th'' + B(m_b) = k_u u + ...`` is the
+    same with ``(J_f, k_u, m_b)`` and ``(J_f / s, k_u / s, m_b / s)`` (the ball's row is
+    homogeneous in its mass), so a frame inertia is also a torque gain *and* a ball mass, one
+    parameter more; greedy stages that took the gain first add the mass later. Once at most
+    (the best replacement), and recorded in ``confounded`` (kind ``replaced``).
+    """
+    names = [e.name for e, _ in chosen]
+    pairs = {(a, c) for entry in confounded if entry["kind"] == "pair"
+             for a, c in (tuple(entry["pair"]), tuple(entry["pair"])[::-1])
+             if a in names and c not in names and c in EFFECTS and c != "track_bumps"}
+    if not pairs or len(chosen) < 2:
+        return chosen, sensors
+    _, c_te, w = prob.cost(chosen, sensors)
+    _, n_eff = effective_samples(prob, w, tau_noise)
+    seg0, seg_n, scale = prob.segment_costs(w), prob.segment_samples(w), prob.segment_scale()
+    best: tuple[float, str, str, str, Fit] | None = None
+    for a, c in sorted(pairs):
+        for b in names:
+            if b == a:
+                continue
+            rest = [(e, v) for e, v in chosen if e.name not in (a, b)]
+            fit = prob.fit(rest, EFFECTS[c], None, sensors, max_nfev=20)
+            if not fit.ok or fit.segment_costs is None or fit.cost_test <= 0:
+                continue
+            k = EFFECTS[c].k - EFFECTS[a].k - EFFECTS[b].k
+            dbic = _dbic(seg0, fit.segment_costs, seg_n, n_eff, k, scale=scale)
+            held = 1.0 - c_te / fit.cost_test      # what S gains over S' on held-out data
+            vals = display_values(EFFECTS[c], fit.values[-1])
+            if (dbic < 0.0 and held < crit.threshold(b)
+                    and plausibility(c, vals, prob.base) is None
+                    and effect_size(c, fit.values[-1], prob.base) >= MIN_SIZE.get(c, 0.0)
+                    and _degenerate(prob, fit, crit.degenerate_corr) is None
+                    and (best is None or dbic < best[0])):
+                best = (dbic, a, b, c, fit)
+    if best is None:
+        return chosen, sensors
+    dbic, a, b, c, fit = best
+    note = (f"{a} and {b} replaced by {c}: one effect explains what the two did (dBIC "
+            f"{dbic:.1f} for {EFFECTS[c].k - EFFECTS[a].k - EFFECTS[b].k:+d} parameter(s), "
+            f"held-out cost {fit.cost_test / c_te:.3f} x); {a} and {c} were reported as "
+            "confounded")
+    _add_confound(confounded, 0, [a, b, c], "replaced", float("nan"), note)
+    if progress:
+        progress(note)
+    return _refit(prob, fit.chosen(), fit.sensors)
+
+
+def _evidence(row: dict[str, Any]) -> float:
+    """A significant candidate's dBIC: its group's where the group test made it significant."""
+    d = row["group"]["dbic"] if row["significant_by"] == "group" else row["dbic"]
+    return float(d) if d is not None and math.isfinite(d) else math.inf
 
 
 def _refit(prob: Problem, chosen: Chosen, sensors: list[FloatArray], passes: int = 2
@@ -1555,8 +1636,9 @@ def _note_confounds(prob: Problem, confounded: list[dict[str, Any]], st: _Stage,
                           f"residual (held-out gains {best['heldout_gain']:.3f} vs "
                           f"{other['heldout_gain']:.3f}, parameter correlation "
                           f"{rho:.2f}): the data cannot tell them apart; "
-                          f"{best['effect']} is kept, the stronger evidence (dBIC "
-                          f"{best['dbic']:.1f} vs {other['dbic']:.1f})")
+                          f"{best['effect']} is kept (the stage's choice: significant, "
+                          f"plausible first, lowest dBIC; dBIC {_evidence(best):.1f} vs "
+                          f"{other['dbic']:.1f})")
 
 
 def _note_sensor_confounds(prob: Problem, confounded: list[dict[str, Any]], fit: Fit,

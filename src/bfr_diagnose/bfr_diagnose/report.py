@@ -333,7 +333,8 @@ def _md_ranking(d: Diagnosis) -> list[str]:
           "recording's sensor model refitted with it); it must beat the largest gain the same "
           "fit reaches on pure noise (the null), lower the BIC by 6, be identifiable (not "
           "degenerate) and exceed its engineering floor. Of those, each stage adds the one "
-          "with the lowest dBIC (the strongest evidence per parameter). An effect selected "
+          "with the lowest dBIC (the strongest evidence, its parameters counted; a plausible "
+          "one before a suspect). An effect selected "
           "at a later stage is judged on top of the effects chosen before it.", ""]
     return L
 
