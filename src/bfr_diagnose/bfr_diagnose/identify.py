@@ -1087,25 +1087,16 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
     cands = [c for c in prob.candidates if only is None or c in only]
     chosen: Chosen = []
     sensors = [np.array(s, float) for s in sensors0]
-    c_tr, c_te, w = prob.cost(chosen, sensors)
-    tau, n_eff = effective_samples(prob, w, tau_noise)
-    prob.prior_tau = tau
     stages: list[dict[str, Any]] = []
     confounded: list[dict[str, Any]] = []
-    final = Fit(effects=[], values=[], sensors=sensors, cost_train=c_tr, cost_test=c_te)
     for index in range(max_effects):
         if index:  # each stage's weights from its own residual (Problem.reweight), and the
             # chosen effects and sensors refitted under them: the stage's baseline
             chosen, sensors = _refit(prob, chosen, sensors)
-            c_tr, c_te, w = prob.cost(chosen, sensors)
-            tau, n_eff = effective_samples(prob, w, tau_noise)
-            prob.prior_tau = tau
-        st = _Stage(index=index, chosen=chosen, sensors=sensors, cost_train=c_tr,
-                    cost_test=c_te, w=w, n_eff=n_eff, seg_costs=prob.segment_costs(w),
-                    seg_n=prob.segment_samples(w), seg_scale=prob.segment_scale())
+        st, prob.prior_tau = _stage(prob, index, chosen, sensors, tau_noise)
         rows, fits = _assess_candidates(prob, st, cands, crit, progress)
         stages.append({"stage": index + 1, "candidates": rows,
-                       "cost_train": c_tr, "cost_test": c_te})
+                       "cost_train": st.cost_train, "cost_test": st.cost_test})
         _note_degenerate(confounded, st, rows)
         sig = [r for r in rows if r["significant"]]
         if not sig:
@@ -1117,10 +1108,7 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
         best["selected"] = True
         _note_confounds(prob, confounded, st, rows, best, fits[best["effect"]],
                         crit.confound_corr)
-        final = fits[best["effect"]]
-        chosen, sensors = final.chosen(), final.sensors
-        c_tr, c_te, w = prob.cost(chosen, sensors)
-        final.cost_train, final.cost_test = c_tr, c_te
+        chosen, sensors = fits[best["effect"]].chosen(), fits[best["effect"]].sensors
     # the final model refitted with weights from its own residual: its intervals (and its
     # sensors') rest on the residual it leaves, not on the stage's weights
     chosen, sensors = _refit(prob, chosen, sensors)
@@ -1128,7 +1116,7 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
     final = (prob.fit(chosen[:-1], chosen[-1][0], chosen[-1][1], sensors) if chosen
              else prob.fit([], None, None, sensors))
     chosen, sensors = final.chosen(), final.sensors
-    c_tr, c_te, w = prob.cost(chosen, sensors)
+    _, _, w = prob.cost(chosen, sensors)
     tau, _ = effective_samples(prob, w, tau_noise)
     _note_sensor_confounds(prob, confounded, final, crit.confound_corr)
     params, _ = apply_effects(prob.base, chosen)
@@ -1139,6 +1127,19 @@ def select_effects(prob: Problem, thresholds: dict[str, float], sensors0: list[F
                               for p, s in zip(prob.parts, final.sensors, strict=True)],
                      parameters=parameter_table(final, tau),
                      sensor_table=sensor_table(prob, final, tau))
+
+
+def _stage(prob: Problem, index: int, chosen: Chosen, sensors: list[FloatArray],
+           tau_noise: float) -> tuple[_Stage, float]:
+    """The baseline of ``chosen`` under the current weights, and its residual's time.
+
+    The time [samples] is :func:`effective_samples`'s (a stage's calibration prior uses it).
+    """
+    c_tr, c_te, w = prob.cost(chosen, sensors)
+    tau, n_eff = effective_samples(prob, w, tau_noise)
+    return _Stage(index=index, chosen=chosen, sensors=sensors, cost_train=c_tr, cost_test=c_te,
+                  w=w, n_eff=n_eff, seg_costs=prob.segment_costs(w),
+                  seg_n=prob.segment_samples(w), seg_scale=prob.segment_scale()), tau
 
 
 def _simplify(prob: Problem, chosen: Chosen, sensors: list[FloatArray],
@@ -1163,9 +1164,7 @@ def _simplify(prob: Problem, chosen: Chosen, sensors: list[FloatArray],
              if a in names and c not in names and c in EFFECTS and c != "track_bumps"}
     if not pairs or len(chosen) < 2:
         return chosen, sensors
-    _, c_te, w = prob.cost(chosen, sensors)
-    _, n_eff = effective_samples(prob, w, tau_noise)
-    seg0, seg_n, scale = prob.segment_costs(w), prob.segment_samples(w), prob.segment_scale()
+    st, _ = _stage(prob, len(chosen), chosen, sensors, tau_noise)
     best: tuple[float, str, str, str, Fit] | None = None
     for a, c in sorted(pairs):
         for b in names:
@@ -1175,9 +1174,9 @@ def _simplify(prob: Problem, chosen: Chosen, sensors: list[FloatArray],
             fit = prob.fit(rest, EFFECTS[c], None, sensors, max_nfev=20)
             if not fit.ok or fit.segment_costs is None or fit.cost_test <= 0:
                 continue
-            k = EFFECTS[c].k - EFFECTS[a].k - EFFECTS[b].k
-            dbic = _dbic(seg0, fit.segment_costs, seg_n, n_eff, k, scale=scale)
-            held = 1.0 - c_te / fit.cost_test      # what S gains over S' on held-out data
+            dbic = _dbic(st.seg_costs, fit.segment_costs, st.seg_n, st.n_eff,
+                         EFFECTS[c].k - EFFECTS[a].k - EFFECTS[b].k, scale=st.seg_scale)
+            held = 1.0 - st.cost_test / fit.cost_test   # what S gains over S' on held-out
             vals = display_values(EFFECTS[c], fit.values[-1])
             if (dbic < 0.0 and held < crit.threshold(b)
                     and plausibility(c, vals, prob.base) is None
@@ -1190,7 +1189,7 @@ def _simplify(prob: Problem, chosen: Chosen, sensors: list[FloatArray],
     dbic, a, b, c, fit = best
     note = (f"{a} and {b} replaced by {c}: one effect explains what the two did (dBIC "
             f"{dbic:.1f} for {EFFECTS[c].k - EFFECTS[a].k - EFFECTS[b].k:+d} parameter(s), "
-            f"held-out cost {fit.cost_test / c_te:.3f} x); {a} and {c} were reported as "
+            f"held-out cost {fit.cost_test / st.cost_test:.3f} x); {a} and {c} were reported as "
             "confounded")
     _add_confound(confounded, 0, [a, b, c], "replaced", float("nan"), note)
     if progress:
