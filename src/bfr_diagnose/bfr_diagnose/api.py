@@ -37,6 +37,7 @@ from bfr_diagnose.effects import (
     sensor_correction,
     sensor_names_for,
 )
+from bfr_diagnose.grip import grip
 from bfr_diagnose.identify import (
     Part,
     Problem,
@@ -280,7 +281,14 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
     between = between_recordings(prob, sel) if len(parts) > 1 else {"per_recording": [],
                                                                      "joint": []}
     say("held-out metrics and short-horizon predictions per recording")
-    results = [_part_result(prob, i, sel, sensors0, noises[i], opts) for i in range(len(parts))]
+    results = [_part_result(prob, i, sel, sensors0, noises[i], opts, corrected)
+               for i in range(len(parts))]
+    slipping = [pr.summary["grip"]["slip_test"]["mu"] for pr in results
+                if pr.summary["grip"].get("verdict") == "slips"]
+    if slipping:  # friction-limited rolling: a term of the contact model (bfr_model.contact)
+        mu = float(np.median(slipping))
+        corrected = corrected.replace(**{"contact.static_friction": mu,
+                                         "contact.dynamic_friction": mu})
     findings = _summary(recordings=recordings, results=results, opts=opts, sel=sel,
                         null=null, suspects=suspects, between=between, notes=notes,
                         base=base)
@@ -435,6 +443,9 @@ def _notes(suspects: dict[str, str], results: list[PartResult],
             out.append(f"{pr.name}: the frame was held (theta did not change): the ball's "
                        "rows alone are analysed (contour, rolling radius, the ball's inertia, "
                        "rolling resistance; nothing of the frame's drive).")
+        g = pr.summary.get("grip", {})
+        if g.get("verdict") == "slips":
+            out.append(f"{pr.name}: {g['meaning']}.")
         n_runs = len(pr.prep.info.get("runs", [])) or 1
         if n_runs > 1:
             out.append(f"{pr.name}: {n_runs} runs or pieces diagnosed together (each "
@@ -488,8 +499,11 @@ def _whiteness_lag(ev: ResidualEvaluator, opts: DiagnoseOptions) -> int:
 
 
 def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarray],
-                 noise: PartNoise, opts: DiagnoseOptions) -> PartResult:
-    """Residuals, location, held-out metrics and predictions of one recording."""
+                 noise: PartNoise, opts: DiagnoseOptions, corrected: RigParams) -> PartResult:
+    """Residuals, location, held-out metrics, predictions and the ball's grip of one recording.
+
+    ``corrected``: the selection's parameters without the suspects (the grip's model).
+    """
     part = prob.parts[i]
     ev = part.ev
     prep = ev.prep
@@ -526,6 +540,7 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
                                           keep_traces=400)
               for k, (p, r, s) in models.items()}
     metrics = _metrics(part, before, after, located, smoothed, causal)
+    ball_grip = grip(prep, corrected, prob.base, s1, res1.phi, res1.phi_dot, test_t)
     summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],
                "duration": float(prep.t[-1] - prep.t[0]),
                "usable_s": float(np.sum(ev.rows_mask) * opts.prep.dt),
@@ -533,7 +548,7 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
                "preprocessing": {**{k: v for k, v in prep.info.items()},
                                  "noise": {k: _f(v) for k, v in prep.noise.items()}},
                "sensor_model_nominal_physics": asdict(s0), "sensor_model": asdict(s1),
-               "located": loc, "metrics": metrics}
+               "located": loc, "metrics": metrics, "grip": ball_grip}
     return PartResult(name=part.name, kind=part.kind, rows=part.rows, prep=prep, sensor0=s0,
                       sensor=s1, res_raw=res_raw, res_before=res0, res_after=res1,
                       sigma=part.sigma, test_mask=part.test, pred_raw=smoothed["raw"],
@@ -634,6 +649,7 @@ def _summary(*, recordings: list[tuple[str, list[Recording]]], results: list[Par
         "confounded": sel.confounded,
         "located": first.summary["located"],
         "metrics": first.summary["metrics"],
+        "grip": first.summary["grip"],
         "recordings": [pr.summary for pr in results],
         "null": null.to_json(),
         "options": {"prep": asdict(opts.prep), "residual": asdict(opts.residual),

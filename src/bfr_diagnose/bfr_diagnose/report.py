@@ -89,6 +89,13 @@ def corrected_yaml(d: Diagnosis) -> str:
                          f"(95 % CI {p['ci95'][0]:.4g} .. {p['ci95'][1]:.4g})")
     for name, why in s["suspects"].items():
         lines.append(f"NOT applied (suspect, physically implausible): {name}: {why}.")
+    for rec in s["recordings"]:
+        g = rec.get("grip", {})
+        if g.get("verdict") == "slips":
+            lines.append(f"{Path(rec['name']).name}: the ball slips (mu = "
+                         f"{g['slip_test']['mu']:.3g}); contact.static_friction and "
+                         "contact.dynamic_friction carry it for the contact model (the rigid "
+                         "model cannot slip).")
     for c in s["confounded"]:
         if c.get("kind") in ("pair", "sensor"):
             lines.append(f"Confounded: {' / '.join(c['effects'])} (only a combination is "
@@ -161,6 +168,9 @@ def format_text(s: dict[str, Any]) -> str:
                            f"{k} {_num(pb[k], '.3g')} -> {_num(pa[k], '.3g')} "
                            f"(x{_num(_ratio(pb[k], pa[k]), '.3g')})"
                            for k in pb if _num(pb[k]) != "n/a"))
+        g = rec.get("grip", {})
+        if g:
+            out.append(f"  ball's grip: {g['verdict']}: {g['meaning']}")
     out.append(f"wall time {s['wall_time_s']:.1f} s")
     return "\n".join(out)
 
@@ -296,6 +306,39 @@ def _md_fit(d: Diagnosis) -> list[str]:
     return [*L, ""]
 
 
+def _md_grip(d: Diagnosis) -> list[str]:
+    """The ball's grip: friction demand and slip test per recording (bfr_diagnose.grip)."""
+    L = ["## The ball's grip: does it roll without slipping?", "",
+         "Friction demand: the friction coefficient (on a plate edge) that rolling without "
+         "slip needs along the recording under the corrected model. Slip test: the ball alone "
+         "under the measured frame motion, 100 ms ahead of the state fitted to the 100 ms "
+         "before each held-out window, rolling against friction-limited rolling with the "
+         "coefficient the training windows chose (docs/diagnosis.md).", "",
+         "| recording | demand p50 / p90 / p99 / max | where the max is | mu chosen | "
+         "ball [rad]: nominal, rolling -> slipping (ratio) | windows better / worse (p) | "
+         "verdict |", "|---|---|---|---|---|---|---|"]
+    for pr in d.parts:
+        g = pr.summary.get("grip", {})
+        fd, st = g.get("friction_demand", {}), g.get("slip_test")
+        if "p50" not in fd:
+            L.append(f"| {Path(pr.name).name} | | | | | | {g.get('verdict', 'not tested')}: "
+                     f"{g.get('meaning', '')} |")
+            continue
+        where = f"t = {fd['t_max']:.2f} s, phi = {fd['phi_max_deg']:.0f} deg"
+        cells = "| | |"
+        mu = "rolling"
+        if st:
+            mu = "rolling" if st["mu"] is None else f"{st['mu']:.3g}"
+            cells = (f"{st['ball_rmse_nominal_rolling']:.3g}, {st['ball_rmse_rolling']:.3g} -> "
+                     f"{st['ball_rmse_slipping']:.3g} (x{st['improvement']:.2f}) | "
+                     f"{st['windows_better']} / {st['windows_worse']} "
+                     f"({st['sign_test_p']:.1g}) |")
+        L.append(f"| {Path(pr.name).name} | {fd['p50']:.3g} / {fd['p90']:.3g} / "
+                 f"{fd['p99']:.3g} / {fd['max']:.3g} | {where} | {mu} | {cells} "
+                 f"**{g['verdict']}** |")
+    return [*L, ""]
+
+
 def _md_where(d: Diagnosis) -> list[str]:
     L = ["## Where the nominal residual exceeds the noise", ""]
     for pr in d.parts:
@@ -362,7 +405,8 @@ def _markdown(d: Diagnosis, figs: list[str]) -> str:
     if degen:
         L += ["## Degenerate fits (not added)", ""]
         L += [f"- {c['note']}" for c in degen] + [""]
-    L += _md_read(d) + _md_sensors(d) + _md_fit(d) + _md_where(d) + _md_ranking(d)
+    L += _md_read(d) + _md_sensors(d) + _md_fit(d) + _md_grip(d) + _md_where(d)
+    L += _md_ranking(d)
     L += ["## Figures", ""] + [f"![{f}]({f})" for f in figs] + [""]
     L += ["Files: `corrected_params.yaml` (physics: run it with `bfr simulate --params` or as "
           "the simulator node's parameter file; suspects left out), `sensor_model.yaml` (each "

@@ -1,0 +1,198 @@
+"""Tests of the ball's grip (:mod:`bfr_diagnose.grip`): the friction demand and the slip test.
+
+Physics first: the ball alone under the frame's motion, rolling, follows the rigid model's
+own trajectory (and converges at first order as the step shrinks); a friction coefficient no
+demand reaches leaves it rolling to the last bit; with no friction at all the ball slides as
+the rigid model with a spinless ball; the friction demand equals the one derived apart from
+the model's spin rate and normal force. Then the verdicts on truth the slip model did not
+make: a closed loop on the rigid model (no slip) and on the force-based contact model
+(compliant contact, friction-limited rolling, :mod:`bfr_model.contact`) whose friction is
+below what its orbit demands.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from bfr_diagnose.cli import main as diagnose_main
+from bfr_diagnose.preprocess import Prepared, SensorCorrection, prepare
+from bfr_diagnose.residual import ResidualEvaluator
+from bfr_diagnose.synth import SynthConfig, contact_recording, stabilised_recording
+from bfr_model.dynamics import RigidModel
+from bfr_model.params import RigParams
+
+from bfr_diagnose import grip
+
+DT = 0.002  # [s] grid step (the diagnosis's)
+DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "ntnu-rig"
+
+
+def _torque(t: float) -> float:
+    """A torque that shakes the frame both ways [N m]."""
+    return 0.006 * np.sin(2 * np.pi * 1.3 * t) + 0.003 * np.sin(2 * np.pi * 3.1 * t + 0.4)
+
+
+def _rigid_run(params: RigParams, duration: float = 0.6, sub: int = 20
+               ) -> tuple[Prepared, np.ndarray]:
+    """The rigid model under :func:`_torque` from the ball in the top waist (contact kept:
+    the normal force stays above 28 mN).
+
+    RK4 at ``DT / sub`` with the torque of each sub-step's middle; the grid carries the exact
+    theta, theta_dot and theta_ddot (the model's own acceleration). Returns a Prepared of the
+    frame motion (the ball's measurements are not used) and the true states ``[theta, phi,
+    theta_dot, phi_dot]`` on the grid.
+    """
+    m = RigidModel(params)
+    n = round(duration / DT)
+    x = np.array([0.0, 0.05, 0.0, 0.3, 0.0, 0.0])
+    xs = np.empty((n + 1, 4))
+    acc = np.empty(n + 1)
+    for k in range(n + 1):
+        xs[k] = x[:4]
+        acc[k] = m.accelerations(x[:4], _torque(k * DT))[0]
+        for s in range(sub):  # the torque at each sub-step's middle: smooth in time
+            x = m.step(x, _torque((k + (s + 0.5) / sub) * DT), DT / sub, 1, 0.0)
+    t = DT * np.arange(n + 1)
+    nan = np.full(t.size, np.nan)
+    prep = Prepared(t=t, theta=xs[:, 0], theta_dot=xs[:, 2], theta_ddot=acc,
+                    u=np.array([_torque(v) for v in t]), psi_w=nan, psi_w_dot=nan.copy(),
+                    ball_ok=np.ones(t.size, bool), frame_ok=np.ones(t.size, bool),
+                    has_ball=True, latency0=0.0, noise={"camera": 1e-4, "theta": 0.0})
+    return prep, xs
+
+
+def test_rolling_ball_alone_follows_the_rigid_model_and_converges() -> None:
+    """Under the frame's exact motion the ball's row alone reproduces the coupled model's
+    contact angle (the frame's torque is whatever gives the measured theta_ddot): over 0.5 s
+    the error at a 2 ms step is below 3e-5 rad (measured 1.1e-5), less than half that at
+    1 ms (4.4e-6), and at 0.5 ms near the floor of the frame's motion interpolated linearly
+    across a grid step (3.4e-6): the step is not what limits the slip test."""
+    params = RigParams()
+    prep, xs = _rigid_run(params)
+    ball = grip._Ball.of(params, prep, SensorCorrection())
+    n = 250
+    errs = []
+    for step in (grip.MAX_STEP, grip.MAX_STEP / 2, grip.MAX_STEP / 4):
+        ns = round(DT / step)
+        phi = grip._rollout(xs[0, 1], xs[0, 3], 0, n, ball.th, ball.thd, ball.thdd, -1.0, DT, ns,
+                         ball.pf, ball.pt, *ball.model.geom_args, ball.jb, ball.rb, ball.rr)
+        errs.append(float(np.max(np.abs(phi - xs[:n + 1, 1]))))
+    assert errs[0] < 3e-5 and errs[1] < 0.5 * errs[0] and errs[2] < errs[1] < 6e-6, errs
+
+
+def test_a_friction_no_demand_reaches_keeps_it_rolling_to_the_last_bit() -> None:
+    """mu far above the demand: the ball never slips, the rollout is rolling's, bit for bit."""
+    params = RigParams()
+    prep, xs = _rigid_run(params)
+    ball = grip._Ball.of(params, prep, SensorCorrection())
+    rolling = ball.roll(xs[0, 1], xs[0, 3], 0, 250, -1.0)
+    assert np.array_equal(ball.roll(xs[0, 1], xs[0, 3], 0, 250, 50.0), rolling)
+
+
+def test_without_friction_the_ball_slides_like_a_spinless_ball() -> None:
+    """mu = 0: no torque ever reaches the spin, so the ball's centre moves as the rigid model's
+    with J_b = 0 rolling (the spin's share of the row is all friction's); the same start and
+    frame, and the seed's ball slides measurably apart from its rolling self."""
+    params = RigParams()
+    prep, xs = _rigid_run(params)
+    ball = grip._Ball.of(params, prep, SensorCorrection())
+    spinless = grip._Ball.of(params.replace(**{"ball.inertia": 1e-15}), prep, SensorCorrection())
+    slide = ball.roll(xs[0, 1], xs[0, 3], 0, 250, 0.0)
+    point = spinless.roll(xs[0, 1], xs[0, 3], 0, 250, -1.0)
+    assert np.max(np.abs(slide - point)) < 1e-9
+    assert np.max(np.abs(slide - ball.roll(xs[0, 1], xs[0, 3], 0, 250, -1.0))) > 1e-2
+
+
+def test_friction_demand_matches_the_spin_rate_and_normal_force() -> None:
+    """The demand ``|J_b omega_b'| / (F_n R_b)`` against an independent derivation along
+    the rigid run: omega_b from :meth:`RigidModel.ball_spin_rate` differentiated by central
+    differences of the RK4 trajectory, F_n from :meth:`RigidModel.normal_force` (measured
+    agreement 1e-5 relative where the demand exceeds a thousandth)."""
+    params = RigParams()
+    prep, xs = _rigid_run(params)
+    m = RigidModel(params)
+    ball = grip._Ball.of(params, prep, SensorCorrection())
+    idx = np.arange(1, prep.n - 1)
+    mu_req, fn = grip._demand_kernel(idx, ball.th, ball.thd, ball.thdd,
+                                  np.ascontiguousarray(xs[:, 1]),
+                                  np.ascontiguousarray(xs[:, 3]), ball.pf,
+                                  *m.geom_args, ball.jb, ball.rr, ball.rb)
+    w = m.ball_spin_rate(xs)
+    wdot = (w[2:] - w[:-2]) / (2 * DT)
+    fn_ref = np.array([m.normal_force(xs[k], prep.u[k]) for k in idx])
+    ref = np.abs(params.ball.inertia * wdot) / (fn_ref * params.ball.radius)
+    assert np.allclose(fn, fn_ref, rtol=1e-9)
+    big = ref > 1e-3
+    assert big.sum() > 100
+    assert np.allclose(mu_req[big], ref[big], rtol=2e-3), np.max(np.abs(mu_req / ref - 1)[big])
+
+
+# -- verdicts on closed loops ------------------------------------------------------------------
+
+def _grip_of(rec) -> dict:  # noqa: ANN001
+    """The grip of a recording under the nominal model (alternate seconds held out)."""
+    base = RigParams()
+    prep = prepare(rec)
+    res = ResidualEvaluator(prep).evaluate(base, SensorCorrection())
+    test = np.floor(prep.t) % 2 == 1
+    return grip.grip(prep, base, base, SensorCorrection(), res.phi, res.phi_dot, test)
+
+
+def test_a_rigid_ball_rolls() -> None:
+    """A closed loop on the rigid model (it cannot slip): verdict ``rolls``, no contact lost,
+    and the friction its orbit demands is reported (this controller's orbit needs up to
+    about 0.7)."""
+    base = RigParams()
+    rec = stabilised_recording(base, base, SynthConfig(duration=12.0), np.random.default_rng(3))
+    assert rec.meta["ball_rolled"]
+    g = _grip_of(rec)
+    assert g["verdict"] == "rolls", g
+    fd = g["friction_demand"]
+    assert fd["lift_off_fraction"] == 0.0
+    assert 0.2 < fd["max"] < 2.0 and fd["p50"] < fd["p90"] < fd["p99"] <= fd["max"]
+
+
+@pytest.mark.parametrize("seed", [3, 5])
+def test_a_contact_model_ball_that_slips_gets_its_friction_coefficient(seed: int) -> None:
+    """Truth of another structure: the contact model (free ball, compliant contact) with
+    mu = 0.5 on the plate edges, below the 0.7-0.8 its closed loop demands at the peaks (the
+    controller loses the ball below about 0.5). The training windows choose a coefficient
+    within a grid step of the truth (0.57 on all nine such recordings of 16-60 s measured).
+    The held-out verdict follows its own rule and is weak here, because the ball slips only
+    at the demand's peaks: 4-23 held-out windows differ from rolling, and two of the seven
+    measured with a first-order draft of the integrator reached p < 0.01 (this code: seed 3
+    10 of 13 windows better, p = 0.05; seed 5 8 of 14, p = 0.4)."""
+    base = RigParams()
+    plant = base.replace(**{"contact.static_friction": 0.5, "contact.dynamic_friction": 0.5})
+    rec = contact_recording(plant, base, SynthConfig(duration=40.0), np.random.default_rng(seed))
+    assert rec.meta["ball_rolled"]
+    g = _grip_of(rec)
+    st = g["slip_test"]
+    assert st["mu"] in (0.38, 0.57), st
+    assert g["friction_demand"]["max"] > 0.5
+    slips = (st["improvement"] >= grip.MIN_GAIN and st["sign_test_p"] < grip.ALPHA)
+    assert g["verdict"] == ("slips" if slips else "rolls"), g
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ntnu-rig is absent")
+@pytest.mark.parametrize(("name", "verdict"), [("Actually_worked", "slips"), ("fin", "rolls")])
+def test_the_real_ball_slips_where_the_rig_brakes_hard(name: str, verdict: str,
+                                                       capsys: pytest.CaptureFixture) -> None:
+    """The NTNU rig: on Actually_worked, whose controller brakes the frame at -0.1 N m from
+    10 rad/s, rolling would need mu up to 0.56 and the ball slips (mu 0.17: the held-out
+    ball 1.5x better, 35 of 40 windows, p = 7e-7); on fin, gentler (rolling needs at most
+    0.12), it rolls and the data reject mu <= 0.075. The diagnosis writes the coefficient
+    for the contact model into corrected_params.yaml only where the ball slips."""
+    assert diagnose_main([str(DATA / f"{name}.txt"), "--json", "--quiet", "--no-plots"]) == 0
+    s = json.loads(capsys.readouterr().out)
+    g = s["grip"]
+    assert g["verdict"] == verdict, g
+    if verdict == "slips":
+        assert 0.1 <= g["slip_test"]["mu"] <= 0.26 and g["slip_test"]["improvement"] > 1.3
+        assert g["friction_demand"]["max"] > 0.4
+        assert any("slips" in n for n in s["notes"])
+    else:
+        assert g["friction_demand"]["max"] < 0.2 and g["slip_test"]["mu"] is None
