@@ -36,10 +36,13 @@ friction coefficient on a plate edge.
    instead of its simulated one, so the figure is the ball's alone). mu is chosen on the
    training windows over :data:`MU_GRID` (values the demand never reaches act as rolling
    and are skipped) and rolling; the held-out windows score rolling against the chosen mu,
-   and a one-sided sign test over the windows says whether slipping predicts the ball better
-   more often than chance.
+   and a one-sided sign-flip randomisation test of the windows' paired differences (each
+   window's squared error rolling minus slipping; under no difference each sign is as
+   likely, :data:`FLIPS` random flips, a fixed seed) says whether slipping predicts the
+   ball better than chance would. It weighs each window by how much it changes: a few
+   braking windows mended and many gentle ones slightly worse count as what they are.
 3. **Verdict.** ``slips`` when the held-out RMS improves by at least :data:`MIN_GAIN` and the
-   sign test's p-value is below :data:`ALPHA`; ``rolls`` otherwise (the report then gives
+   randomisation test's p-value is below :data:`ALPHA`; ``rolls`` otherwise (the report then gives
    the largest coefficient the training windows rejected: mu is above it).
 
 The grid is walked down from rolling and stops once the training cost has risen after a
@@ -61,11 +64,10 @@ from bfr_model.jit import njit
 from bfr_model.params import RigParams
 from numpy.typing import NDArray
 from scipy.optimize import least_squares
-from scipy.stats import binom
 
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 
-__all__ = ["ALPHA", "MAX_STEP", "MIN_GAIN", "MU_GRID", "grip"]
+__all__ = ["ALPHA", "FLIPS", "MAX_STEP", "MIN_GAIN", "MU_GRID", "grip"]
 
 FloatArray = NDArray[np.float64]
 
@@ -75,8 +77,11 @@ MU_GRID = (0.05, 0.075, 0.11, 0.17, 0.25, 0.38, 0.57)
 #: Held-out improvement of the ball's prediction that slipping must reach to be reported.
 MIN_GAIN = 1.1
 
-#: Level of the one-sided sign test over held-out windows.
+#: Level of the one-sided randomisation test over held-out windows.
 ALPHA = 0.01
+
+#: Random sign flips of the randomisation test (seeded: the same data, the same p).
+FLIPS = 20000
 
 #: Longest step of the ball's integration [s] (a grid step longer than this is cut into equal
 #: sub-steps). Halving it moves the slip test's figures on the NTNU logs by < 1 %.
@@ -294,6 +299,15 @@ def _scores(ball: _Ball, starts: list[int], meas: FloatArray, phi: FloatArray,
     return out
 
 
+def _flip_test(d: FloatArray) -> float:
+    """One-sided p of ``sum(d) > 0`` under random signs of d (a sign-flip randomisation)."""
+    d = d[d != 0.0]
+    if d.size == 0:
+        return 1.0
+    signs = np.random.default_rng(0).choice((-1.0, 1.0), size=(FLIPS, d.size))
+    return float((1 + np.sum(signs @ d >= d.sum())) / (1 + FLIPS))
+
+
 def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: SensorCorrection,
          phi: FloatArray, phi_dot: FloatArray, test_mask_t: NDArray[np.bool_],
          horizon: float = 0.1, every: float = 0.2) -> dict[str, Any]:
@@ -320,7 +334,8 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
         ``friction_demand`` (percentiles of mu_req, its maximum's time [s] and place [deg],
         the smallest normal force [N], the share without contact), ``slip_test`` (the grid,
         training costs, chosen mu, held-out RMS of the ball's in-frame angle [rad] rolling
-        and slipping and the nominal model's rolling, windows better, the sign test's p),
+        and slipping and the nominal model's rolling, windows better and worse, the
+        randomisation test's p),
         ``verdict`` and ``meaning``.
     """
     if not prep.has_ball or prep.frame_held:
@@ -369,7 +384,7 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
 
     better = int(np.sum(slip_h[ok] < roll_h[ok]))
     worse = int(np.sum(slip_h[ok] > roll_h[ok]))
-    p = float(binom.sf(better - 1, better + worse, 0.5)) if better + worse else 1.0
+    p = _flip_test(roll_h[ok] - slip_h[ok])
     gain = rms(roll_h) / max(rms(slip_h), 1e-300)
     out["slip_test"] = {
         "mu_grid": [m for m in grid if m in costs],
@@ -380,16 +395,16 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
         "ball_rmse_rolling": rms(roll_h), "ball_rmse_slipping": rms(slip_h),
         "ball_rmse_nominal_rolling": rms(nom_h), "improvement": gain,
         "improvement_vs_nominal": rms(nom_h) / max(rms(slip_h), 1e-300),
-        "windows_better": better, "windows_worse": worse, "sign_test_p": p,
+        "windows_better": better, "windows_worse": worse, "p_value": p,
         "horizon": nh * dt, "unit": "rad (the ball's angle in the frame)"}
     if mu > 0 and gain >= MIN_GAIN and p < ALPHA:
         out.update(verdict="slips", meaning=(
             f"the ball slips on the plate edges where rolling needs more than mu = {mu:.2g} "
             f"(up to {top:.2f} at t = {demand['t_max']:.2f} s): friction-limited rolling "
             f"predicts the ball {gain:.2f}x better on held-out windows ({better} of "
-            f"{better + worse} better, sign test p = {p:.1g}); the rigid model cannot slip, "
-            f"the contact model can (contact.static_friction = contact.dynamic_friction = "
-            f"{mu:.2g})"))
+            f"{better + worse} better, randomisation test p = {p:.1g}); the rigid model "
+            f"cannot slip, the contact model can (contact.static_friction = "
+            f"contact.dynamic_friction = {mu:.2g})"))
     else:
         tried = "rolling" if mu < 0 else f"mu = {mu:.2g}"
         bound = (f"; the data reject mu <= {max(rejected):.2g}" if rejected else "")

@@ -332,7 +332,7 @@ def _md_grip(d: Diagnosis) -> list[str]:
             cells = (f"{st['ball_rmse_nominal_rolling']:.3g}, {st['ball_rmse_rolling']:.3g} -> "
                      f"{st['ball_rmse_slipping']:.3g} (x{st['improvement']:.2f}) | "
                      f"{st['windows_better']} / {st['windows_worse']} "
-                     f"({st['sign_test_p']:.1g}) |")
+                     f"({st['p_value']:.1g}) |")
         L.append(f"| {Path(pr.name).name} | {fd['p50']:.3g} / {fd['p90']:.3g} / "
                  f"{fd['p99']:.3g} / {fd['max']:.3g} | {where} | {mu} | {cells} "
                  f"**{g['verdict']}** |")
