@@ -328,3 +328,45 @@ def test_several_short_runs_all_read(tmp_path: Path) -> None:
     log = parse_rig_log(write_rig_log(tmp_path / "s.txt", runs), warn=False)
     assert len(log.runs) == 4
     assert [len(r) for r in log.runs] == [r.n for r in runs]
+
+
+def _lattice_log(counts: int, digits: int, n: int = 3000) -> str:
+    """A rig log whose frame turns smoothly, its angle on ``counts`` steps a turn printed with
+    ``digits`` significant digits (1 kHz lines, the ball seen throughout)."""
+    t = 4.0 + 0.001 * np.arange(n)
+    q = 2 * np.pi / counts
+    theta = q * np.round((0.3 + 1.5 * np.sin(1.3 * (t - 4.0))) / q)
+    return "\n".join("[inf] " + ",".join(
+        f"{k}={v:.{digits}g}" for k, v in (("t", ti), ("torque", 0.01), ("theta", th),
+                                           ("phi", th + 0.12), ("dtheta", 0.5), ("dphi", 0.4),
+                                           ("x", 0.01), ("y", 0.08)))
+        for ti, th in zip(t, theta, strict=True)) + "\n"
+
+
+@pytest.mark.parametrize(("counts", "digits", "expected"), [
+    (1024, 8, 2 * np.pi / 1024),   # a coarse encoder printed finely: its step, measured
+    (4096, 8, 2 * np.pi / 4096),
+    (65536, 6, None),              # a fine encoder: the print (6 digits) is the resolution
+])
+def test_encoder_lattice_is_measured_not_assumed(counts: int, digits: int,
+                                                 expected: float | None) -> None:
+    """The angle's resolution is the coarser of its print and the encoder's lattice, which the
+    reader measures from the angle's changes (whole steps) and reports: a 1024-count encoder
+    printed to 8 digits is not a 1e-7 rad one (that had made a clean recording's frame row
+    6x its noise)."""
+    log = parse_rig_log_text(_lattice_log(counts, digits))
+    rec = log.recording(0)
+    lattice = [c for c in rec.meta["conversions"] if "encoder lattice" in c]
+    if expected is None:
+        assert not lattice and rec.meta["theta_resolution"] == pytest.approx(1e-5)
+    else:
+        assert lattice and rec.meta["theta_resolution"] == pytest.approx(expected, rel=1e-6)
+
+
+@needs_data
+def test_ntnu_logs_are_read_at_their_print_resolution() -> None:
+    """On the shipped logs no encoder lattice coarser than the print is seen."""
+    for path in sorted(DATA.glob("*.txt")):
+        rec = parse_rig_log(path, warn=False).recording(0)
+        assert not [c for c in rec.meta["conversions"] if "encoder lattice" in c], path
+        assert rec.meta["theta_resolution"] in (1e-3, 1e-2), path

@@ -26,7 +26,9 @@ measured on every run (:mod:`bfr_model.io.timing`) and reported in
 
 - ``theta`` has our sign (counter-clockwise positive, theta and phi advance together) and
   its zero agrees with ours modulo pi; it is printed with 6 significant digits, so its
-  resolution is 1 mrad for |theta| in [100, 1000) rad and 10 mrad above.
+  resolution is 1 mrad for |theta| in [100, 1000) rad and 10 mrad above, unless its changes
+  show an encoder lattice coarser than that (:func:`encoder_step`, measured per run and
+  named in ``meta["conversions"]``).
 - ``torque`` has our sign: a positive command accelerates ``theta`` positive.
 - ``x, y`` are the camera's ball centre in the world frame [m] (0, 0 = no ball), held
   between camera frames. Any ratio of log lines to camera fixes is read (the NTNU rig: a
@@ -763,6 +765,36 @@ def _theta_resolution(theta_raw: NDArray[np.float64]) -> float:
     return 10.0 ** (math.floor(math.log10(magnitude)) - 5) if magnitude > 0 else 1e-6
 
 
+#: An encoder lattice is taken when this share of theta's changes lies within 5 % of a whole
+#: number of steps, the step at least three print quanta (:func:`encoder_step`).
+ENCODER_LATTICE_SHARE = 0.9
+
+
+def encoder_step(theta_raw: NDArray[np.float64], printed: float) -> float:
+    """The encoder's step [rad] when the logged angle sits on a lattice coarser than its print.
+
+    The step q is the 2nd percentile of theta's changes above half a print quantum (the
+    smallest step the encoder takes, one count); it is taken when at least
+    :data:`ENCODER_LATTICE_SHARE` of the changes lie within 5 % of a whole number of q and
+    q is at least three print quanta (a coarse encoder printed with many digits: 1024 counts
+    a turn printed to 1e-7 rad); q is then refined as the changes' sum over their steps'
+    count. Else 0: the print is the resolution (a fine encoder, or a
+    smooth angle). Measured per recording, never assumed.
+    """
+    d = np.abs(np.diff(theta_raw[np.isfinite(theta_raw)]))
+    d = d[d > 0.5 * printed]
+    if d.size < 50:
+        return 0.0
+    q = float(np.percentile(d, 2))
+    if q < 3.0 * printed:
+        return 0.0
+    k = np.round(d / q)
+    on = np.abs(d - k * q) < 0.05 * q
+    if float(np.mean(on)) < ENCODER_LATTICE_SHARE:
+        return 0.0
+    return float(np.sum(d[on]) / np.sum(k[on]))  # refined over every step taken
+
+
 def phi_pairing_lag(raw_theta: NDArray[np.float64], raw_phi: NDArray[np.float64],
                     x: NDArray[np.float64], y: NDArray[np.float64],
                     dtheta: NDArray[np.float64], new_fix: NDArray[np.bool_],
@@ -887,6 +919,11 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     shift = _turn_shift(raw.theta, rebase_turns, conversions)
     theta = raw.theta - shift
     theta_res = _theta_resolution(raw.theta)
+    step = encoder_step(raw.theta, theta_res)
+    if step:
+        conversions.append(f"theta sits on an encoder lattice of {step:.6g} rad (measured: its "
+                           f"changes are whole steps), coarser than its print ({theta_res:g} "
+                           "rad): that step is its resolution")
     new_fix = fixes.seen & (np.arange(raw.t.size) == fixes.last_fix)
     fix_idx = np.nonzero(new_fix)[0]
     if phi_theta_lag is None:
@@ -921,7 +958,7 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
         extra={"phi_rig": phi_rig_ours, "dphi_rig": raw.dphi,
                "ball_seen": fixes.seen.astype(float)},
         meta=_rig_log_meta(run, raw.t, source=source, conversions=conversions, notes=notes,
-                           shift=shift, theta_res=theta_res,
+                           shift=shift, theta_res=max(theta_res, step),
                            backlog_end=fixes.backlog_end, phi_theta_lag=phi_theta_lag,
                            stale_after=stale_after, timing=timing),
     )
