@@ -144,7 +144,8 @@ def test_malformed_input_errors(text: str, message: str) -> None:
                                                 r"key\(s\) 'phi'"),
     ("\n".join([*body(3), line(4.1, theta=float("nan")), *body(3, 4.2)]), "non_finite", 1,
      None),
-    ("\n".join([*body(3), line(4.1, x=float("inf")), *body(3, 4.2)]), "non_finite", 1, None),
+    ("\n".join([*body(3), line(4.1, dtheta=float("nan")), *body(3, 4.2)]), "non_finite", 1,
+     None),
     ("\n".join([*body(3), line(4.1).replace("theta=1", "theta=1.0.2"), *body(3, 4.2)]),
      "corrupt", 1, r"mem:4: value of 'theta' is not a number: '1.0.2'"),
     ("\n".join([*body(5), *body(5, 3.0)]), "out_of_order", 5, None),
@@ -165,9 +166,10 @@ def test_bad_lines_are_accounted(text: str, cause: str, count: int,
         assert any(re.search(warning, w) for w in log.warnings)
 
 
-def test_ball_off_the_frame_is_excluded_not_dropped() -> None:
+@pytest.mark.parametrize("x", [1e300, float("inf")])
+def test_ball_off_the_frame_is_excluded_not_dropped(x: float) -> None:
     rows = body(20)
-    rows[7] = line(4.007, theta=1.014, x=1e300, y=0.08)
+    rows[7] = line(4.007, theta=1.014, x=x, y=0.08)
     rec = parse_rig_log_text("\n".join(rows) + "\n", "mem").recording()
     acc = rec.meta["read_account"]
     assert acc["samples_used"] == 20 and acc["degraded"] == {"ball_off_frame": 1}
@@ -370,3 +372,17 @@ def test_ntnu_logs_are_read_at_their_print_resolution() -> None:
         rec = parse_rig_log(path, warn=False).recording(0)
         assert not [c for c in rec.meta["conversions"] if "encoder lattice" in c], path
         assert rec.meta["theta_resolution"] in (1e-3, 1e-2), path
+
+
+def test_nan_ball_and_rig_estimates_keep_the_line() -> None:
+    """A camera that logs "no ball" as NaN, and NaN in the rig's own phi and dphi: the line's
+    encoder and torque are kept (a frame-only recording whose camera writes NaN had lost every
+    sample), the NaN fix reads as no ball, said in the notes."""
+    lines = body(40)
+    lines[10] = line(4.010, theta=1.02, x=float("nan"), y=float("nan"))
+    lines[20] = line(4.020, theta=1.04, phi=float("nan"), dphi=float("nan"))
+    log = parse_rig_log_text("\n".join(NOISE + lines) + "\n")
+    rec = log.recording(0)
+    assert rec.n == 40
+    assert any("NaN: read as no ball" in n for n in rec.meta["notes"])
+    assert np.all(np.isfinite(rec.theta)) and np.all(np.isfinite(rec.torque))

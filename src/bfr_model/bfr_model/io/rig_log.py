@@ -133,6 +133,8 @@ class RigRun:
         Samples whose held ball position is off the frame (excluded from the ball fields).
     account : ReadAccount, optional
         What the run's lines held and what was used (:mod:`bfr_model.io.account`).
+    nan_ball : int
+        Kept samples whose ball centre was logged as NaN, read as "no ball" (x = y = 0).
     """
 
     data: NDArray[np.float64]
@@ -141,6 +143,7 @@ class RigRun:
     dropped_duplicates: int = 0
     ball_off: NDArray[np.bool_] | None = None
     account: ReadAccount | None = None
+    nan_ball: int = 0
 
     def column(self, key: str) -> NDArray[np.float64]:
         """One raw column by key (see :data:`KEYS`)."""
@@ -501,10 +504,18 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
     data = (np.frombuffer(raw.values, dtype=np.float64).reshape(-1, len(KEYS)) if len(raw)
             else np.zeros((0, len(KEYS))))
     col = {k: data[:, j] for j, k in enumerate(KEYS)}
+    # a NaN ball centre is the camera's "no ball" (as x = y = 0), not a sample to drop: the
+    # encoder and torque of its line are good. The rig's phi and dphi are not needed (phi
+    # is recomputed from theta and the fix, dphi used only where finite).
+    no_xy = np.isnan(col["x"]) | np.isnan(col["y"])
+    if no_xy.any():
+        data = data.copy()
+        data[no_xy, KEYS.index("x")] = 0.0
+        data[no_xy, KEYS.index("y")] = 0.0
+        col = {k: data[:, j] for j, k in enumerate(KEYS)}
     no_ball = (col["x"] == 0.0) & (col["y"] == 0.0)
     g = gate_samples(col["t"], col["theta"], col["dtheta"], col["torque"],
                      np.where(no_ball, np.nan, col["x"]), np.where(no_ball, np.nan, col["y"]),
-                     others=(col["phi"], col["dphi"], col["x"], col["y"]),
                      rates=(col["dphi"],), gates=gates)
     if g.dropped.get("duplicate") and duplicates == "error":
         k = g.first["duplicate"]
@@ -517,7 +528,8 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
                         lost=raw.lost, unit="line")
     return RigRun(data=data[keep], lines=lines[keep], events=events,
                   dropped_duplicates=int(g.dropped.get("duplicate", 0)),
-                  ball_off=g.ball_off[keep], account=account)
+                  ball_off=g.ball_off[keep], account=account,
+                  nan_ball=int(np.count_nonzero(no_xy[keep])))
 
 
 def _scan(lines: Iterable[str], source: str, duplicates: str,
@@ -730,6 +742,9 @@ def _ball_fixes(run: RigRun, raw: _RigColumns, *, stale_after: float, drop_backl
     age = np.where(has_fix, t - t[np.maximum(last_fix, 0)], np.inf)
     lost = _ball_lost(run.events, fix_idx, n)
     valid = seen & has_fix & (age <= stale_after) & (idx >= backlog_end) & ~lost
+    if run.nan_ball:
+        notes.append(f"{run.nan_ball} sample(s) log the ball centre as NaN: read as no ball "
+                     "(x = y = 0), the line's encoder and torque used")
     if run.ball_off is not None and run.ball_off.any():
         valid &= ~run.ball_off
         notes.append(f"{int(run.ball_off.sum())} sample(s) hold a ball position off the frame: "
