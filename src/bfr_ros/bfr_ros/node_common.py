@@ -357,7 +357,12 @@ def image_to_array(msg: Any) -> tuple[np.ndarray | None, str]:
     if item > 1 and bool(msg.is_bigendian) != (sys.byteorder == "big"):
         arr = arr.astype(arr.dtype.newbyteorder("="))
     if enc in ("rgb8", "rgba8"):
-        arr = arr[..., [2, 1, 0, 3][:ch]]
+        import cv2  # noqa: PLC0415 - only colour images need it; the other nodes never load it
+
+        # OpenCV's channel swap: 15 us for 640x480 against 0.2-1 ms for numpy's fancy
+        # indexing, which had made an rgb8 camera drop half its frames
+        arr = cv2.cvtColor(np.ascontiguousarray(arr), cv2.COLOR_RGB2BGR if ch == 3
+                           else cv2.COLOR_RGBA2BGRA)
     return arr, ""
 
 
