@@ -91,6 +91,10 @@ __all__ = ["CameraNode", "ThetaBuffer", "main", "node_defaults"]
 _NS = 1_000_000_000
 
 
+#: An image stamped later than this after its own arrival [ns] has a stamp from a clock ahead
+#: of this computer's (a stamp is the exposure's time, which precedes the arrival): warned.
+STAMP_AHEAD_NS = 2_000_000
+
 #: Groups of rig.yaml the camera node reads: the ball's size and the frame's contour.
 RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
 
@@ -358,6 +362,12 @@ class CameraNode(Node):
             self._invalid(out, err, t0)
             return
         t_ns = msg.stamp_ns
+        ahead = t_ns - self.get_clock().now().nanoseconds
+        if ahead > STAMP_AHEAD_NS and self.throttle("stamp_ahead", 5.0):
+            self.get_logger().warn(
+                f"image stamped {ahead / 1e6:.1f} ms after it arrived: the camera's clock is "
+                "ahead of this computer's, and phi pairs the fix with a later frame angle "
+                "(the angle error is the stamp error times the frame's speed)")
         self.take_joints()
         theta, why = self.theta.theta_at(t_ns)
         det = self.detector.detect(arr, 0.0 if theta is None else theta,
