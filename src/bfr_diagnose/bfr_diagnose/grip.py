@@ -105,6 +105,16 @@ def _ball_acc(th, ph, thd, phd, thdd, P, g0, g1, g2, g3, g4, g5, g6, g7):  # noq
 
 
 @njit
+def _rolling_torque(jb, rr, thdd, lam, lam1, phd, phdd):  # noqa: ANN001, ANN202
+    """``J_b omega_b'`` of a rolling ball [N m] (module docstring, 1).
+
+    ``omega_b = theta_dot - lam phi_dot / R``, so ``omega_b' = theta_ddot - (lam' phi_dot^2 +
+    lam phi_ddot) / R``.
+    """
+    return jb * (thdd - (lam1 * phd * phd + lam * phdd) / rr)
+
+
+@njit
 def _rollout(ph, phd, j, n, th, thd, thdd, mu, dt, ns, Pf, Pt, g0, g1, g2, g3, g4, g5, g6,  # noqa: ANN001, ANN202
              g7, jb, rb, rr):  # noqa: ANN001
     """The contact angle at grid samples ``j .. j + n`` under the measured frame motion.
@@ -130,7 +140,7 @@ def _rollout(ph, phd, j, n, th, thd, thdd, mu, dt, ns, Pf, Pt, g0, g1, g2, g3, g
                 c = curve_terms(ph, Pf, g0, g1, g2, g3, g4, g5, g6, g7)
                 lam = c[8]
                 cap = mu * max(fn, 0.0) * rb
-                tau = jb * (tdd - (c[9] * phd * phd + lam * a_r) / rr)
+                tau = _rolling_torque(jb, rr, tdd, lam, c[9], phd, a_r)
             if mu < 0.0 or (rolling and abs(tau) <= cap):
                 # rolling: the midpoint rule (second order), the frame at the half step
                 fm = f + 0.5 / ns
@@ -246,7 +256,7 @@ def _demand_kernel(idx, th, thd, thdd, phi, phi_dot, Pf, g0, g1, g2, g3, g4, g5,
         a_r, fn = _ball_acc(th[k], phi[k], thd[k], phi_dot[k], thdd[k], Pf, g0, g1, g2, g3, g4,
                             g5, g6, g7)
         c = curve_terms(phi[k], Pf, g0, g1, g2, g3, g4, g5, g6, g7)
-        tau = jb * (thdd[k] - (c[9] * phi_dot[k] * phi_dot[k] + c[8] * a_r) / rr)
+        tau = _rolling_torque(jb, rr, thdd[k], c[8], c[9], phi_dot[k], a_r)
         fns[q] = fn
         if fn > 0.0:
             mu_req[q] = abs(tau) / (fn * rb)
