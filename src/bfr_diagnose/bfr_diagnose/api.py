@@ -539,8 +539,15 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
     causal = {k: causal_prediction_errors(prep, p, r.phi, r.phi_dot, s, test_t,
                                           keep_traces=400)
               for k, (p, r, s) in models.items()}
-    metrics = _metrics(part, before, after, located, smoothed, causal)
     ball_grip = grip(prep, corrected, prob.base, s1, res1.phi, res1.phi_dot, test_t)
+    if ball_grip["verdict"] == "slips":
+        # the model corrected_params.yaml describes (no suspects) with the slip it found
+        mu = ball_grip["slip_test"]["mu"]
+        smoothed["after_slip"] = prediction_errors(prep, corrected, res1.phi, res1.phi_dot,
+                                                   s1, test_t, slip_mu=mu)
+        causal["after_slip"] = causal_prediction_errors(prep, corrected, res1.phi,
+                                                        res1.phi_dot, s1, test_t, slip_mu=mu)
+    metrics = _metrics(part, before, after, located, smoothed, causal)
     summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],
                "duration": float(prep.t[-1] - prep.t[0]),
                "usable_s": float(np.sum(ev.rows_mask) * opts.prep.dt),
@@ -577,8 +584,10 @@ def _metrics(part: Part, before: dict[str, Any], after: dict[str, Any],
              causal: dict[str, dict[str, Any]]) -> dict[str, Any]:
     """Held-out fit before and after, every measure, of one recording.
 
-    ``smoothed`` and ``causal`` are the predictions (``raw``, ``before``, ``after``) from the
-    smoothed state and from the state each model fits to the data before: the JSON keys
+    ``smoothed`` and ``causal`` are the predictions (``raw``, ``before``, ``after`` and,
+    where the ball slips, ``after_slip``: the plausible effects alone, as
+    ``corrected_params.yaml``, with the grip's friction) from
+    the smoothed state and from the state each model fits to the data before: the JSON keys
     ``prediction_*`` and ``prediction_causal_*``.
     """
     rows = list(before)
@@ -590,12 +599,17 @@ def _metrics(part: Part, before: dict[str, Any], after: dict[str, Any],
 
     def predictions(preds: dict[str, dict[str, Any]], key: str) -> dict[str, Any]:
         pr, pb, pa = (preds[k]["rmse"] for k in ("raw", "before", "after"))
-        return {
+        out = {
             **{f"{key}_{k}": {n: v for n, v in p.items() if n != "traces"}
                for k, p in preds.items()},
             f"{key}_improvement": {k: ratio(pb.get(k), pa.get(k)) for k in pa},
             f"{key}_improvement_vs_raw": {k: ratio(pr.get(k), pa.get(k)) for k in pa},
         }
+        if "after_slip" in preds:  # the corrected model with the ball's slip (grip)
+            ps = preds["after_slip"]["rmse"]
+            out[f"{key}_improvement_with_slip"] = {k: ratio(pb.get(k), ps.get(k))
+                                                   for k in ps}
+        return out
 
     return {
         "heldout_before": before, "heldout_after": after,

@@ -45,11 +45,27 @@ friction coefficient on a plate edge.
    randomisation test's p-value is below :data:`ALPHA`; ``rolls`` otherwise (the report then gives
    the largest coefficient the training windows rejected: mu is above it).
 
+4. **Frame and ball together, slipping** (:func:`coupled_rollout`: the short-horizon
+   predictions of :mod:`bfr_diagnose.locate` with ``slip_mu``). The spin as a fifth state
+   with the rolling constraint ``omega_b = theta_dot - lam phi_dot / R`` replaced by its
+   Lagrange multiplier, the friction torque tau_f on the spin: ``J_b omega_b' = tau_f`` and
+   the generalised forces ``(-tau_f, lam tau_f / R)`` on ``(theta, phi)`` of the model
+   without the spin's inertia (:func:`~bfr_model.dynamics.forced_terms` with ``J_b = 0``).
+   Rolling (``tau_f = J_b omega_b'`` of the constrained motion) gives back the rigid model's
+   ``M`` exactly; sliding, ``tau_f = -sgn(omega_b - omega_roll) mu F_n R_b`` with F_n, which
+   depends on tau_f through the accelerations, solved together with it (both are affine in
+   tau_f). The friction's power ``tau_f (omega_b - omega_roll)`` is never positive. The frame
+   feels the slip: the ball's spin no longer loads it. Without wobble (``frame.wobble``).
+   Checked against the force-based contact model (another structure) and by the energy of
+   a frictionless ball (tests/test_diagnose_grip.py).
+
 The grid is walked down from rolling and stops once the training cost has risen after a
 fall (the cost of mu is unimodal in every case seen).
 
 Slip is not a term of the rigid model the simulator runs; it is one of the contact model
 (``contact.static_friction`` and ``contact.dynamic_friction``), which the report names. The
+diagnosis's predictions carry it (4): where the ball slips, the plausible effects (those
+``corrected_params.yaml`` holds) with mu predict the ball beside the selection's model. The
 test needs a ball on a turning frame; a held frame or a frame alone is not tested.
 """
 
@@ -59,7 +75,17 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from bfr_model.dynamics import I_CL, I_JB, I_R, RigidModel, curve_terms, mass_terms, rigid_terms
+from bfr_model.dynamics import (
+    I_CL,
+    I_JB,
+    I_R,
+    RigidModel,
+    curve_terms,
+    forced_terms,
+    mass_terms,
+    rigid_rk4_steps,
+    rigid_terms,
+)
 from bfr_model.jit import njit
 from bfr_model.params import RigParams
 from numpy.typing import NDArray
@@ -67,7 +93,8 @@ from scipy.optimize import least_squares
 
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 
-__all__ = ["ALPHA", "FLIPS", "MAX_STEP", "MIN_GAIN", "MU_GRID", "grip"]
+__all__ = ["ALPHA", "FLIPS", "MAX_STEP", "MIN_GAIN", "MU_GRID", "coupled_rollout", "grip",
+           "slip_parameters"]
 
 FloatArray = NDArray[np.float64]
 
@@ -185,6 +212,135 @@ def _rollout(ph, phd, j, n, th, thd, thdd, mu, dt, ns, Pf, Pt, g0, g1, g2, g3, g
             return out
         out[k - j + 1] = ph
     return out
+
+
+@njit
+def _sliding_acc(th, ph, thd, phd, u, sgn, mu, Pt, g0, g1, g2, g3, g4, g5, g6, g7, rb, rr):  # noqa: ANN001, ANN202
+    """``(theta_ddot, phi_ddot, tau_f)`` of the frame and a sliding ball (module docstring, 4).
+
+    The model without the ball's spin (``Pt``: ``J_b = 0``) plus the friction torque's
+    generalised forces ``(-tau_f, lam tau_f / R)``; ``tau_f = -sgn mu F_n R_b`` with sgn the
+    sign of the relative spin. The accelerations and F_n are affine in tau_f, so the
+    friction and the normal force it depends on are solved together exactly; without
+    contact (``F_n <= 0``) there is no friction.
+    """
+    lam = curve_terms(ph, Pt, g0, g1, g2, g3, g4, g5, g6, g7)[8]
+    a0 = forced_terms(th, ph, thd, phd, u, 0.0, 0.0, Pt, g0, g1, g2, g3, g4, g5, g6, g7)
+    a1 = forced_terms(th, ph, thd, phd, u, -1.0, lam / rr, Pt, g0, g1, g2, g3, g4, g5, g6, g7)
+    k = -sgn * mu * rb
+    tau = k * a0[4] / (1.0 - k * (a1[4] - a0[4]))
+    if tau * sgn > 0.0:  # F_n <= 0: the ball is not pressed on the edges
+        tau = 0.0
+    return a0[0] + (a1[0] - a0[0]) * tau, a0[1] + (a1[1] - a0[1]) * tau, tau
+
+
+@njit
+def _coupled_rollout(x0, u, dt, ns, mu, Pf, Pt, g0, g1, g2, g3, g4, g5, g6, g7, jb, rb, rr):  # noqa: ANN001, ANN202
+    """States ``[theta, phi, theta_dot, phi_dot]`` (n + 1, 4) of frame and ball, open loop.
+
+    The coupled model with friction-limited rolling (module docstring, 4) along the torque
+    record u (``u[k]`` held over a grid step of dt). While the ball rolls, one RK4 step of
+    the rigid model per grid step (:func:`~bfr_model.dynamics.rigid_rk4_steps`, as
+    :func:`bfr_diagnose.locate._rigid_rollout`: ``mu < 0`` or a demand that never reaches
+    the bound gives its states to the last bit); the demand (1) is checked at each grid
+    step's start. Sliding: ``ns`` midpoint steps per grid step with the spin as a fifth
+    state, until the relative spin crosses zero; the rest of that grid step rolls (RK4).
+    """
+    n = u.shape[0]
+    xs = np.empty((n + 1, 4))
+    x = np.zeros(6)
+    x[:4] = x0[:4]
+    xs[0, :] = x[:4]
+    rolling = True
+    w = 0.0
+    sgn = 0.0
+    h = dt / ns
+    for k in range(n):
+        args = (u[k], Pf, g0, g1, g2, g3, g4, g5, g6, g7)
+        s0 = 0
+        if rolling:
+            if mu >= 0.0:
+                thdd, phdd, _, _, fn = rigid_terms(x[0], x[1], x[2], x[3], u[k], Pf, g0, g1,
+                                                   g2, g3, g4, g5, g6, g7)
+                c = curve_terms(x[1], Pf, g0, g1, g2, g3, g4, g5, g6, g7)
+                tau = _rolling_torque(jb, rr, thdd, c[8], c[9], x[3], phdd)
+                if abs(tau) > mu * max(fn, 0.0) * rb:
+                    rolling = False
+                    w = x[2] - c[8] * x[3] / rr
+                    sgn = -1.0 if tau > 0.0 else 1.0
+            if rolling:
+                x = rigid_rk4_steps(x, 0.0, dt, 1, args)
+                xs[k + 1, :] = x[:4]
+                if not (np.isfinite(x[1]) and abs(x[3]) < 1e3):
+                    xs[k + 1:, :] = np.nan
+                    return xs
+                continue
+        while s0 < ns and not rolling:
+            th, ph, thd, phd = x[0], x[1], x[2], x[3]
+            a_t, a_p, tau = _sliding_acc(th, ph, thd, phd, u[k], sgn, mu, Pt, g0, g1, g2, g3,
+                                         g4, g5, g6, g7, rb, rr)
+            thm, phm = th + 0.5 * h * thd, ph + 0.5 * h * phd
+            thdm, phdm = thd + 0.5 * h * a_t, phd + 0.5 * h * a_p
+            a_t, a_p, tau = _sliding_acc(thm, phm, thdm, phdm, u[k], sgn, mu, Pt, g0, g1, g2,
+                                         g3, g4, g5, g6, g7, rb, rr)
+            x[0] += h * thdm
+            x[1] += h * phdm
+            x[2] += h * a_t
+            x[3] += h * a_p
+            w += h * tau / jb
+            s0 += 1
+            lam = curve_terms(x[1], Pf, g0, g1, g2, g3, g4, g5, g6, g7)[8]
+            if sgn * (w - (x[2] - lam * x[3] / rr)) <= 0.0:  # the relative spin crossed zero
+                rolling = True
+        if s0 < ns:
+            x = rigid_rk4_steps(x, 0.0, h, ns - s0, args)
+        xs[k + 1, :] = x[:4]
+        if not (np.isfinite(x[1]) and abs(x[3]) < 1e3):
+            xs[k + 1:, :] = np.nan
+            return xs
+    return xs
+
+
+def slip_parameters(model: RigidModel) -> tuple[FloatArray, FloatArray, float, float, float]:
+    """``(Pf, Pt, J_b, R_b, R)`` of a model for :func:`coupled_rollout`.
+
+    ``Pt`` is the model's parameter vector without the ball's spin inertia (``J_b = 0``).
+    """
+    pt = model.P.copy()
+    pt[I_JB] = 0.0
+    return (model.P, pt, float(model.P[I_JB]), model.params.ball.radius,
+            float(model.P[I_R]))
+
+
+def coupled_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
+                    mu: float) -> FloatArray:
+    """Frame and ball open loop under a torque record, the ball rolling or sliding.
+
+    Parameters
+    ----------
+    model : RigidModel
+        The rigid model (its ball's spin inertia and radius give the slip's terms).
+    x0 : ndarray
+        Start ``[theta, phi, theta_dot, phi_dot]`` [rad, rad/s]; the ball rolls at the start.
+    u : ndarray
+        Torque command of each grid step [N m] (held over the step).
+    dt : float
+        Grid step [s]; sliding is integrated in steps of at most :data:`MAX_STEP`.
+    mu : float
+        Friction coefficient of the ball on a plate edge [-]; < 0: rolling without slip
+        (the rigid model's RK4 rollout to the last bit).
+
+    Returns
+    -------
+    ndarray
+        States (len(u) + 1, 4); NaN from a non-finite step on.
+    """
+    pf, pt, jb, rb, rr = slip_parameters(model)
+    ns = max(int(np.ceil(dt / MAX_STEP - 1e-9)), 1)
+    x = np.zeros(6)
+    x[:4] = x0[:4]
+    return _coupled_rollout(x, np.ascontiguousarray(u, float), dt, ns, mu, pf, pt,
+                            *model.geom_args, jb, rb, rr)
 
 
 @dataclass(frozen=True, kw_only=True, eq=False)

@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.stats import chi2
 
+from bfr_diagnose.grip import coupled_rollout
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 from bfr_diagnose.residual import ROW_NAMES, Residual
 
@@ -332,6 +333,8 @@ class _Predictor:
         Torque acting at each grid time [N m].
     usable : ndarray of bool
         Grid samples usable (``ball_ok`` with a ball, else ``frame_ok``).
+    slip_mu : float
+        Friction coefficient of the ball on a plate edge [-] (< 0: it rolls without slip).
     """
 
     prep: Prepared
@@ -344,14 +347,18 @@ class _Predictor:
     rho: FloatArray
     u: FloatArray
     usable: NDArray[np.bool_]
+    slip_mu: float = -1.0
 
     def rollout(self, x0: FloatArray, i: int, n: int) -> FloatArray:
         """States (n + 1, 4) open loop from ``x0`` at grid sample i.
 
         ``x0 = [theta, phi, theta_dot, phi_dot]``; the recorded torque ``u[i], ...,
-        u[i + n - 1]`` acts.
+        u[i + n - 1]`` acts. With ``slip_mu`` >= 0 the ball may slip (friction-limited
+        rolling, :func:`bfr_diagnose.grip.coupled_rollout`), rolling at x0.
         """
         u = np.ascontiguousarray(self.u[i:i + n])
+        if self.prep.has_ball and self.slip_mu >= 0.0:
+            return coupled_rollout(self.model, x0, u, self.dt, self.slip_mu)
         if self.prep.has_ball:
             x = np.array([x0[0], x0[1], x0[2], x0[3], 0.0, 0.0])
             return _rigid_rollout(x, u, self.dt, *self.model.kernel_args)
@@ -375,7 +382,7 @@ class _Predictor:
 
 
 def _predictor(prep: Prepared, params: RigParams, sensor: SensorCorrection | None,
-               horizon: float, every: float) -> _Predictor:
+               horizon: float, every: float, slip_mu: float = -1.0) -> _Predictor:
     """The :class:`_Predictor` of a model on a recording under a sensor correction."""
     dt = float(prep.t[1] - prep.t[0])
     sensor = sensor or SensorCorrection()
@@ -386,7 +393,7 @@ def _predictor(prep: Prepared, params: RigParams, sensor: SensorCorrection | Non
                       nh=max(round(horizon / dt), 1), step=max(round(every / dt), 1),
                       theta=prep.theta + sensor.theta_zero, psi_w=psi_w, rho=rho,
                       u=prep.u_for(sensor),
-                      usable=prep.usable)
+                      usable=prep.usable, slip_mu=slip_mu)
 
 
 class _Scores:
@@ -437,7 +444,7 @@ class _Scores:
 def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_dot: FloatArray,
                       sensor: SensorCorrection | None, test_mask_t: NDArray[np.bool_],
                       horizon: float = 0.1, every: float = 0.2,
-                      keep_traces: int = 0) -> dict[str, Any]:
+                      keep_traces: int = 0, slip_mu: float = -1.0) -> dict[str, Any]:
     """Short-horizon open-loop prediction errors on the held-out samples, smoothed start.
 
     At each window start i0 (every ``every`` seconds where ``[i0, i0 + horizon]`` is usable
@@ -465,6 +472,9 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
         Prediction horizon and spacing of the start points [s].
     keep_traces : int
         Return this many predicted traces (for the overlay plot).
+    slip_mu : float
+        Friction coefficient of the ball on a plate edge [-]: >= 0, the ball may slip
+        (:func:`bfr_diagnose.grip.coupled_rollout`); < 0 (default), it rolls.
 
     Returns
     -------
@@ -473,7 +483,7 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
         ``n_windows``, ``horizon`` [s], ``start`` (``"smoothed"``) and optionally
         ``traces``.
     """
-    pred = _predictor(prep, params, sensor, horizon, every)
+    pred = _predictor(prep, params, sensor, horizon, every, slip_mu)
     scores = _Scores(pred, keep_traces)
     for i0 in pred.starts(test_mask_t):
         if prep.has_ball and not (np.isfinite(phi[i0]) and np.isfinite(phi_dot[i0])):
@@ -598,7 +608,7 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
                              phi_dot: FloatArray, sensor: SensorCorrection | None,
                              test_mask_t: NDArray[np.bool_], horizon: float = 0.1,
                              every: float = 0.2, fit_window: float | None = None,
-                             keep_traces: int = 0) -> dict[str, Any]:
+                             keep_traces: int = 0, slip_mu: float = -1.0) -> dict[str, Any]:
     """Short-horizon prediction errors on the held-out samples, the start fitted before.
 
     Causal and model-based: Ljung's k-step prediction with the initial state estimated from
@@ -616,8 +626,9 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
 
     Parameters
     ----------
-    prep, params, phi, phi_dot, sensor, test_mask_t, horizon, every, keep_traces
-        As :func:`prediction_errors` (phi and phi_dot only give the fit's starting guess).
+    prep, params, phi, phi_dot, sensor, test_mask_t, horizon, every, keep_traces, slip_mu
+        As :func:`prediction_errors` (phi and phi_dot only give the fit's starting guess;
+        with slip_mu the ball rolls at the fit window's start).
     fit_window : float, optional
         Length W of the fit window before each start [s] (default: the horizon).
 
@@ -629,7 +640,7 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
         (the fits' residual RMS over the noise, pooled); each trace also holds the fitted
         start (``fit_t`` [s], ``fit_state``).
     """
-    pred = _predictor(prep, params, sensor, horizon, every)
+    pred = _predictor(prep, params, sensor, horizon, every, slip_mu)
     nw = max(round((horizon if fit_window is None else fit_window) / pred.dt), 1)
     scores = _Scores(pred, keep_traces)
     skipped = 0

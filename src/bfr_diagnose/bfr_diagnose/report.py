@@ -168,6 +168,12 @@ def format_text(s: dict[str, Any]) -> str:
                            f"{k} {_num(pb[k], '.3g')} -> {_num(pa[k], '.3g')} "
                            f"(x{_num(_ratio(pb[k], pa[k]), '.3g')})"
                            for k in pb if _num(pb[k]) != "n/a"))
+            if f"{key}_after_slip" in m:
+                ps = m[f"{key}_after_slip"]["rmse"]["ball_angle"]
+                out.append(f"    with the ball's slip (mu = {rec['grip']['slip_test']['mu']:.2g}, "
+                           f"plausible effects only): ball_angle "
+                           f"{_num(pb['ball_angle'], '.3g')} -> {_num(ps, '.3g')} "
+                           f"(x{_num(_ratio(pb['ball_angle'], ps), '.3g')})")
         g = rec.get("grip", {})
         if g:
             out.append(f"  ball's grip: {g['verdict']}: {g['meaning']}")
@@ -303,6 +309,13 @@ def _md_fit(d: Diagnosis) -> list[str]:
                          f"[{_UNITS[k]}] (raw {_num(pr_.get(k), '.3g')}) | "
                          f"{_num(pb[k], '.3g')} | {_num(pa[k], '.3g')} | "
                          f"{_num(_ratio(pb[k], pa[k]), '.3g')} | |")
+            if f"{key}_after_slip" in m:
+                ps = m[f"{key}_after_slip"]["rmse"]["ball_angle"]
+                mu = pr.summary["grip"]["slip_test"]["mu"]
+                L.append(f"| {Path(pr.name).name} | {h:.0f} ms prediction {start}: "
+                         f"ball_angle [rad], plausible effects with the ball's slip "
+                         f"(mu = {mu:.2g}) | {_num(pb['ball_angle'], '.3g')} | "
+                         f"{_num(ps, '.3g')} | {_num(_ratio(pb['ball_angle'], ps), '.3g')} | |")
     return [*L, ""]
 
 

@@ -108,6 +108,7 @@ from bfr_model.params import RigParams
 __all__ = [
     "RigidModel",
     "curve_terms",
+    "forced_terms",
     "frame_gravity",
     "joint_torque",
     "mass_terms",
@@ -258,6 +259,20 @@ def rigid_terms(theta, phi, theta_dot, phi_dot, u, P, R, rho0, orders, ccos, csi
         ``(k_u u + tau_0) theta_dot`` [W], dissipated power [W] (>= 0 while F_n >= 0), normal
         force [N].
     """
+    return forced_terms(theta, phi, theta_dot, phi_dot, u, 0.0, 0.0, P, R, rho0, orders, ccos,
+                        csin, bphi, bh, bw)
+
+
+@njit
+def forced_terms(theta, phi, theta_dot, phi_dot, u, f1, f2, P, R, rho0, orders, ccos, csin,  # noqa: ANN001, ANN201
+                 bphi, bh, bw):  # noqa: ANN001
+    """:func:`rigid_terms` with extra generalised forces ``(f1, f2)`` [N m] on theta and phi.
+
+    ``M q_ddot + c + G = Q + f``: forces from outside the model's terms (the friction torque
+    of a slipping ball, :mod:`bfr_diagnose.grip`). They enter the accelerations and, through
+    them, the normal force; the powers ``p_in`` and ``p_diss`` do not book them. With
+    ``f1 = f2 = 0`` the results are :func:`rigid_terms`' to the last bit.
+    """
     m = P[I_M]
     g = P[I_G]
     c = P[I_CW]
@@ -303,8 +318,8 @@ def rigid_terms(theta, phi, theta_dot, phi_dot, u, P, R, rho0, orders, ccos, csi
     a12 = m12
     a21 = m12 + mu_s * f_th
     a22 = m22 + mu_s * f_ph
-    b1 = q1 - c1 - g1
-    b2 = -mu_s * f0 - c2 - g2
+    b1 = q1 + f1 - c1 - g1
+    b2 = f2 - mu_s * f0 - c2 - g2
     det = a11 * a22 - a12 * a21
     thdd = (a22 * b1 - a12 * b2) / det
     phdd = (a11 * b2 - a21 * b1) / det
