@@ -263,6 +263,7 @@ def test_the_real_ball_slips_where_the_rig_brakes_hard(name: str, verdict: str,
         # 1.44x, the selection with its suspect ball inertia 1.14x)
         with_slip = m["prediction_causal_improvement_with_slip"]["ball_angle"]
         assert with_slip > 1.3 and with_slip > m["prediction_causal_improvement"]["ball_angle"]
+        assert any("stand-in for the slip" in n for n in s["notes"])  # the suspect ball inertia
     else:
         assert g["friction_demand"]["max"] < 0.2 and g["slip_test"]["mu"] is None
         assert "prediction_causal_after_slip" not in m

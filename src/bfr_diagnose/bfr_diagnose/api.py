@@ -446,11 +446,31 @@ def _notes(suspects: dict[str, str], results: list[PartResult],
         g = pr.summary.get("grip", {})
         if g.get("verdict") == "slips":
             out.append(f"{pr.name}: {g['meaning']}.")
+            out += _slip_against_suspects(pr, suspects)
         n_runs = len(pr.prep.info.get("runs", [])) or 1
         if n_runs > 1:
             out.append(f"{pr.name}: {n_runs} runs or pieces diagnosed together (each "
                        "preprocessed alone, placed back to back with unusable gaps).")
     return out + notes
+
+
+def _slip_against_suspects(pr: PartResult, suspects: dict[str, str]) -> list[str]:
+    """Where the ball slips and suspects were selected: which predicts the ball better.
+
+    A rolling model can only mimic slip by its parameters (a lighter ball's spin, a smaller
+    rolling radius); when the plausible effects with the slip predict the ball better than
+    the selection with its suspects (the causal 100 ms measure), the note says so.
+    """
+    m = pr.summary["metrics"]
+    slip = m.get("prediction_causal_after_slip", {}).get("rmse", {}).get("ball_angle")
+    sel = m.get("prediction_causal_after", {}).get("rmse", {}).get("ball_angle")
+    if not suspects or slip is None or sel is None or not slip < sel:
+        return []
+    mu = pr.summary["grip"]["slip_test"]["mu"]
+    return [f"{pr.name}: with the ball's slip (mu = {mu:.2g}) the plausible effects predict "
+            f"the ball 100 ms ahead better than the selection with its suspects "
+            f"({', '.join(suspects)}): {slip:.3g} against {sel:.3g} rad held out; a rolling "
+            "model's suspect can be a stand-in for the slip it cannot express."]
 
 
 def _bound_notes(sel: Selection) -> list[str]:
