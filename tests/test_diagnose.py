@@ -27,7 +27,7 @@ from bfr_diagnose.api import (
     diagnose_recordings,
     held_out_block,
 )
-from bfr_diagnose.effects import EFFECT_NAMES
+from bfr_diagnose.effects import EFFECT_NAMES, EFFECTS, plausibility
 from bfr_diagnose.identify import RESOLVED_Z, Fit, _corr_matrix, _covariance, _degenerate
 from bfr_diagnose.preprocess import Prepared
 from bfr_diagnose.synth import (
@@ -408,6 +408,19 @@ def test_cli_outputs_and_suspects_stay_out_of_the_corrected_parameters(tmp_path:
     assert fitted.ball.mass == pytest.approx(3e-3)  # the suspect is not applied
     report = (out / "report.md").read_text()
     assert "Suspects" in report and "selected at stage" in report
+
+
+def test_a_bump_is_plausible_at_the_plate_edges_scale() -> None:
+    """A bump is a local change of the plate edge, so it is plausible up to the contour
+    harmonics' 3 mm (a 2 mm dent, which the limits cases draw, is a finding, not a suspect);
+    a height at the fit's own bound is not identified and stays a suspect."""
+    base = RigParams()
+    bump = EFFECTS["track_bumps"]
+    assert plausibility("track_bumps", np.array([1.0, -2e-3, 0.1]), base) is None
+    assert plausibility("frame_shape", np.full(14, 2.9e-3), base) is None
+    at_bound = np.array([1.0, bump.upper[1], 0.1])
+    assert "3 mm" in plausibility("track_bumps", at_bound, base)
+    assert "3 mm" in plausibility("track_bumps", -at_bound, base)
 
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ntnu-rig is absent")
