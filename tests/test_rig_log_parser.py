@@ -82,6 +82,33 @@ def test_truncated_final_line_warns_from_file(tmp_path: Path) -> None:
     assert len(rec) == 10
 
 
+@pytest.mark.parametrize("end", ["\r", "\n", "\r\n"])
+def test_cr_lf_and_crlf_line_ends_read_alike(tmp_path: Path, end: str) -> None:
+    """A log with CR-only line ends (old Mac style) reads as its LF and CRLF twins: no
+    'truncated final line', every sample, the same account; the CR read is said."""
+    noise = [n for n in NOISE if "\r" not in n.rstrip("\r")]  # no terminal overwrite
+    rows = [r.rstrip("\r") for r in [*noise, *body(30), "[inf] stopped"]]
+    text = end.join(rows) + end
+    p = tmp_path / "log.txt"
+    p.write_bytes(text.encode())
+    for log in (parse_rig_log(p), parse_rig_log_text(text, str(p))):
+        assert log.warnings == [] and log.n_data == 30 and log.n_lines == len(rows)
+        assert log.skipped == {"terminal": 2, "info": 3}
+        rec = log.recording()
+        assert rec.n == 30 and rec.meta["read_account"]["dropped"] == {}
+        said = [c for c in rec.meta["conversions"] if "carriage return" in c]
+        assert bool(said) == (end == "\r"), rec.meta["conversions"]
+
+
+def test_data_lines_joined_by_a_carriage_return_are_each_read() -> None:
+    """Two data lines joined by CR (an LF lost, or CR line ends inside an LF file): a
+    terminal's overwrite had shown the second only, and the first was lost uncounted."""
+    rows = body(10)
+    rows[4:6] = [rows[4] + "\x0b" + rows[5]]  # the LF after line 5 became a VT
+    log = parse_rig_log_text("\n".join(rows) + "\n", "mem")
+    assert log.n_data == 10 and log.runs[0].account.samples_used == 10
+
+
 def test_partial_line_mid_file_is_skipped_with_warning() -> None:
     rows = body(10)
     rows.insert(5, "[inf] t=4.0045,torque=0.0")
@@ -164,6 +191,40 @@ def test_bad_lines_are_accounted(text: str, cause: str, count: int,
     assert any(a.startswith(cause) and f"line {line_no}" in a for a in acc.actions)
     if warning is not None:
         assert any(re.search(warning, w) for w in log.warnings)
+
+
+@pytest.mark.parametrize(("bad", "found", "what"), [
+    (line(4.1).replace("\r", ",z=3\r"), 9, "unknown key(s) 'z'"),
+    (line(4.1).replace(",dphi=0.4", ""), 7, "missing key(s) 'dphi'"),
+    (line(4.1).replace("\r", ",x=0.02\r"), 9, "keys out of order or repeated"),
+])
+def test_extra_or_missing_field_names_the_counts_and_the_line(bad: str, found: int,
+                                                              what: str) -> None:
+    """A line with a field too many or too few says how many were expected and found, and
+    where: in the warning and in the account's action."""
+    log = parse_rig_log_text("\n".join([*body(3), bad, *body(3, 4.2)]) + "\n", "mem")
+    expect = f"{found} field(s) found where 8 expected"
+    assert any(w.startswith("mem:4: malformed data line skipped: ") and what in w
+               and expect in w for w in log.warnings), log.warnings
+    (action,) = log.runs[0].account.actions
+    assert action.startswith("corrupt: 1 line(s) skipped, first at line 4 (line 4: ")
+    assert expect in action and what in action
+
+
+def test_seconds_used_never_exceed_seconds_present_with_duplicated_stamps() -> None:
+    """Lines 2 and 1 ms apart, every other stamp repeated, and one 4 ms pause: the repeats
+    halve the present samples' median interval, and a hole limit from each set alone had
+    counted the pause as covered by the used samples only (used > present by 4 ms)."""
+    t, rows = 4.0, []
+    for i in range(200):
+        t += 0.004 if i == 100 else (0.002 if i % 2 else 0.001)
+        rows.append(line(round(t, 4), theta=1.0 + 0.002 * i))
+        if i % 2:
+            rows.append(rows[-1])  # the stamp repeated (a second loop step in one quantum)
+    acc = parse_rig_log_text("\n".join(rows) + "\n", "mem").runs[0].account
+    assert dict(acc.dropped) == {"duplicate": 100} and acc.samples_used == 200
+    assert acc.seconds_used <= acc.seconds_present
+    assert acc.seconds_used == pytest.approx(acc.seconds_present, abs=1e-9)  # no time lost
 
 
 @pytest.mark.parametrize("x", [1e300, float("inf")])
