@@ -171,7 +171,7 @@ def test_malformed_input_errors(text: str, message: str) -> None:
                                                 r"key\(s\) 'phi'"),
     ("\n".join([*body(3), line(4.1, theta=float("nan")), *body(3, 4.2)]), "non_finite", 1,
      None),
-    ("\n".join([*body(3), line(4.1, dtheta=float("nan")), *body(3, 4.2)]), "non_finite", 1,
+    ("\n".join([*body(3), line(4.1, dtheta=float("inf")), *body(3, 4.2)]), "non_finite", 1,
      None),
     ("\n".join([*body(3), line(4.1).replace("theta=1", "theta=1.0.2"), *body(3, 4.2)]),
      "corrupt", 1, r"mem:4: value of 'theta' is not a number: '1.0.2'"),
@@ -433,6 +433,24 @@ def test_ntnu_logs_are_read_at_their_print_resolution() -> None:
         rec = parse_rig_log(path, warn=False).recording(0)
         assert not [c for c in rec.meta["conversions"] if "encoder lattice" in c], path
         assert rec.meta["theta_resolution"] in (1e-3, 1e-2), path
+
+
+def test_nan_frame_velocity_keeps_the_line() -> None:
+    """A NaN in the servo's velocity column is a missing velocity sample: the line's angle,
+    torque and camera fix are used, theta_dot is filled between its neighbours, and the
+    notes and the account say how many and how."""
+    rows = [line(4.0 + 0.001 * i, theta=1.0 + 0.002 * i, x=0.01 + 0.001 * (i // 5),
+                 dtheta=0.5 + 0.01 * i) for i in range(40)]
+    rows[10] = line(4.010, theta=1.02, x=0.012, dtheta=float("nan"), torque=0.03)
+    rec = parse_rig_log_text("\n".join(rows) + "\n", "mem").recording(0)
+    assert rec.n == 40 and rec.meta["read_account"]["dropped"] == {}
+    assert rec.theta[10] == pytest.approx(1.02 - 2 * np.pi * 0) and rec.torque[10] == 0.03
+    assert rec.new_fix_mask()[10] and rec.ball_x[10] == pytest.approx(0.012)
+    assert rec.theta_dot[10] == pytest.approx(0.6)  # between 0.59 and 0.61
+    assert any(n.startswith("1 sample(s) log dtheta (the servo's velocity) as NaN")
+               and "interpolated linearly" in n for n in rec.meta["notes"])
+    assert any(a.startswith("velocity_missing: 1 line(s)") and a.endswith("line 11")
+               for a in rec.meta["read_account"]["actions"])
 
 
 def test_nan_ball_and_rig_estimates_keep_the_line() -> None:

@@ -55,6 +55,7 @@ Pure Python + numpy; no ``rclpy``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import io
 import json
 import math
@@ -139,6 +140,9 @@ class RigRun:
     garbage : tuple of int
         Line numbers of the unparseable lines among the run's data lines (skipped; not
         samples; :class:`~bfr_model.io.account.ReadAccount`'s ``garbage``).
+    nan_dtheta : (int, str)
+        Kept samples whose servo velocity ``dtheta`` was logged as NaN (their angle, torque
+        and fix used), and how their velocity was filled (``data`` holds the filled value).
     """
 
     data: NDArray[np.float64]
@@ -149,6 +153,7 @@ class RigRun:
     account: ReadAccount | None = None
     nan_ball: int = 0
     garbage: tuple[int, ...] = ()
+    nan_dtheta: tuple[int, str] = (0, "")
 
     def column(self, key: str) -> NDArray[np.float64]:
         """One raw column by key (see :data:`KEYS`)."""
@@ -589,7 +594,11 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
         data[no_xy, KEYS.index("y")] = 0.0
         col = {k: data[:, j] for j, k in enumerate(KEYS)}
     no_ball = (col["x"] == 0.0) & (col["y"] == 0.0)
-    g = gate_samples(col["t"], col["theta"], col["dtheta"], col["torque"],
+    # a NaN servo velocity is a missing velocity sample, not a missing line: the angle,
+    # torque and fix of the line are good; its dtheta is filled below (_fill_velocity)
+    no_dtheta = np.isnan(col["dtheta"])
+    g = gate_samples(col["t"], col["theta"], np.where(no_dtheta, 0.0, col["dtheta"]),
+                     col["torque"],
                      np.where(no_ball, np.nan, col["x"]), np.where(no_ball, np.nan, col["y"]),
                      rates=(col["dphi"],), gates=gates)
     if g.dropped.get("duplicate") and duplicates == "error":
@@ -601,10 +610,38 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
     events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in raw.events]
     account = g.account(source=source, kind="rig_log", t=col["t"], lines=lines,
                         lost=raw.lost, unit="line", details=raw.details, garbage=raw.garbage)
-    return RigRun(data=data[keep], lines=lines[keep], events=events,
-                  dropped_duplicates=int(g.dropped.get("duplicate", 0)),
+    kept = data[keep]
+    filled = _fill_velocity(kept, no_dtheta[keep])
+    if filled[0]:
+        first = int(lines[keep][no_dtheta[keep]][0])
+        account = dataclasses.replace(account, actions=(
+            *account.actions, f"velocity_missing: {filled[0]} line(s) log dtheta as NaN, "
+                              f"used with theta_dot {filled[1]}, first at line {first}"))
+    return RigRun(data=kept, lines=lines[keep], events=events,
+                  dropped_duplicates=int(g.dropped.get("duplicate", 0)), nan_dtheta=filled,
                   ball_off=g.ball_off[keep], account=account,
                   nan_ball=int(np.count_nonzero(no_xy[keep])), garbage=tuple(raw.garbage))
+
+
+def _fill_velocity(data: NDArray[np.float64], missing: NDArray[np.bool_]) -> tuple[int, str]:
+    """Fill the missing (NaN) servo velocities of a run's kept rows in place.
+
+    Linear in time between the nearest logged velocities (held at the ends); when the run
+    logs none, the rate of the angle (central differences). Returns how many were filled
+    and how (for the recording's notes).
+    """
+    n = int(np.count_nonzero(missing))
+    if n == 0:
+        return 0, ""
+    t = data[:, KEYS.index("t")]
+    j = KEYS.index("dtheta")
+    have = ~missing
+    if have.any():
+        data[missing, j] = np.interp(t[missing], t[have], data[have, j])
+        return n, "interpolated linearly in time between the nearest logged values"
+    theta = data[:, KEYS.index("theta")]
+    data[:, j] = np.gradient(theta, t) if t.size > 1 else 0.0
+    return n, "the run logs none: the rate of theta (central differences) instead"
 
 
 def _scan(lines: Iterable[str], source: str, duplicates: str,
@@ -1041,6 +1078,10 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     raw = _RigColumns.of(run)
     conversions: list[str] = []
     notes: list[str] = []
+    if run.nan_dtheta[0]:
+        notes.append(f"{run.nan_dtheta[0]} sample(s) log dtheta (the servo's velocity) as "
+                     "NaN: a missing velocity sample, the line's angle, torque and camera fix "
+                     f"used; theta_dot there {run.nan_dtheta[1]}")
     if run.garbage:
         notes.append(f"{len(run.garbage)} unparseable line(s) among the run's data lines "
                      f"skipped (neither data nor a rig's message), first at line "
