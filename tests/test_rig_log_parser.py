@@ -465,3 +465,29 @@ def test_nan_ball_and_rig_estimates_keep_the_line() -> None:
     assert rec.n == 40
     assert any("NaN: read as no ball" in n for n in rec.meta["notes"])
     assert np.all(np.isfinite(rec.theta)) and np.all(np.isfinite(rec.torque))
+
+
+def test_epoch_stamps_read_as_the_same_log_from_zero(tmp_path: Path) -> None:
+    """Stamps counting from the Unix epoch (t0 = 1.7e9 s) are rebased to the run's first
+    stamp as they are read: the preprocessed timing (fix times on the grid, the camera
+    clock, the frame's rate, the velocity lag) is that of the same log starting at 0 to
+    well under 1 us (before: fix times 1.5 us apart, theta_dot 7e-4 rad/s)."""
+    from bfr_diagnose.preprocess import PrepConfig, prepare  # noqa: PLC0415 - diagnosis level
+    from bfr_model.io.rig_log import write_rig_log  # noqa: PLC0415 - local to these tests
+
+    out = []
+    for t0 in (0.0, 1.7e9):
+        rec = _synthetic_run(900.0, 6, duration=6.0, lag=0.004, pair=3, t0=t0)
+        back = read_rig_log(write_rig_log(tmp_path / f"{t0:.0f}.txt", rec, digits=17),
+                            warn=False)
+        assert back.t[0] == 0.0 and back.meta["time_origin_s"] == t0
+        assert any("first stamp" in c for c in back.meta["conversions"]) == (t0 > 0)
+        out.append((back, prepare(back, PrepConfig(), latency0=0.0)))
+    (r0, p0), (r1, p1) = out
+    np.testing.assert_allclose(p1.fixes.tf - p1.t[0], p0.fixes.tf - p0.t[0], rtol=0,
+                               atol=1e-7)
+    np.testing.assert_allclose(p1.theta_dot, p0.theta_dot, rtol=0, atol=1e-5)
+    assert p1.info["camera_clock"]["period_s"] == pytest.approx(
+        p0.info["camera_clock"]["period_s"], rel=1e-8)
+    lag0 = r0.meta["sensor_timing"]["velocity_lag"]["lag_s"]
+    assert r1.meta["sensor_timing"]["velocity_lag"]["lag_s"] == pytest.approx(lag0, abs=1e-6)

@@ -100,6 +100,12 @@ UNITS = {"t": "s", "torque": "N m", "theta": "rad", "phi": "rad", "dtheta": "rad
 #: Largest pairing lag of the log's ``phi`` searched [samples] (:func:`phi_pairing_lag`).
 MAX_PHI_THETA_LAG = 24
 
+#: Stamps beyond this [s] (3.2 years) count from an epoch (Unix time), not from the program's
+#: start: the run's first stamp is subtracted as it is read (the bag reader's rule for
+#: ``time_origin="auto"``). At 1.7e9 s a double resolves 0.24 us, but every fit through the
+#: stamps (a camera clock's line, a lag) then loses digits to the offset.
+EPOCH_STAMPS = 1e8
+
 _DATA_RE = re.compile(
     r"\[inf\] t=([^,]*),torque=([^,]*),theta=([^,]*),phi=([^,]*),"
     r"dtheta=([^,]*),dphi=([^,]*),x=([^,]*),y=([^,]*)")
@@ -143,6 +149,9 @@ class RigRun:
     nan_dtheta : (int, str)
         Kept samples whose servo velocity ``dtheta`` was logged as NaN (their angle, torque
         and fix used), and how their velocity was filled (``data`` holds the filled value).
+    time_origin : float
+        Stamp [s] subtracted from the run's ``t`` column (its first, when the stamps count
+        from an epoch: :data:`EPOCH_STAMPS`; else 0).
     """
 
     data: NDArray[np.float64]
@@ -154,6 +163,7 @@ class RigRun:
     nan_ball: int = 0
     garbage: tuple[int, ...] = ()
     nan_dtheta: tuple[int, str] = (0, "")
+    time_origin: float = 0.0
 
     def column(self, key: str) -> NDArray[np.float64]:
         """One raw column by key (see :data:`KEYS`)."""
@@ -611,6 +621,12 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
     account = g.account(source=source, kind="rig_log", t=col["t"], lines=lines,
                         lost=raw.lost, unit="line", details=raw.details, garbage=raw.garbage)
     kept = data[keep]
+    origin = 0.0
+    if kept.shape[0] and abs(float(kept[0, 0])) > EPOCH_STAMPS:
+        # an epoch clock: its first stamp subtracted now, in double precision (exact: the
+        # stamps lie within a factor 2 of it), before anything fits a line through them
+        origin = float(kept[0, 0])
+        kept[:, 0] -= origin
     filled = _fill_velocity(kept, no_dtheta[keep])
     if filled[0]:
         first = int(lines[keep][no_dtheta[keep]][0])
@@ -619,6 +635,7 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
                               f"used with theta_dot {filled[1]}, first at line {first}"))
     return RigRun(data=kept, lines=lines[keep], events=events,
                   dropped_duplicates=int(g.dropped.get("duplicate", 0)), nan_dtheta=filled,
+                  time_origin=origin,
                   ball_off=g.ball_off[keep], account=account,
                   nan_ball=int(np.count_nonzero(no_xy[keep])), garbage=tuple(raw.garbage))
 
@@ -1027,6 +1044,7 @@ def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
         "notes": notes,
         "units": {"phi_rig": "rad", "dphi_rig": "rad/s", "ball_seen": "-"},
         "first_line": int(run.lines[0]),
+        "time_origin_s": float(run.time_origin),
         "last_line": int(run.lines[-1]),
         "dropped_duplicates": run.dropped_duplicates,
         "events": [(float(t[min(e, n - 1)]), msg) for e, msg in run.events],
@@ -1078,6 +1096,10 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     raw = _RigColumns.of(run)
     conversions: list[str] = []
     notes: list[str] = []
+    if run.time_origin:
+        conversions.append(f"t: the run's first stamp {run.time_origin!r} s subtracted (the "
+                           f"stamps count from an epoch, beyond {EPOCH_STAMPS:g} s; in double "
+                           "precision as read, before any fit; meta['time_origin_s'])")
     if run.nan_dtheta[0]:
         notes.append(f"{run.nan_dtheta[0]} sample(s) log dtheta (the servo's velocity) as "
                      "NaN: a missing velocity sample, the line's angle, torque and camera fix "
