@@ -226,6 +226,24 @@ def test_several_short_runs_used_together(tmp_path: Path) -> None:
     assert s["effects"] == ["joint_coulomb_friction"], s["effects"]
 
 
+def test_ball_note_of_a_multi_run_log_counts_every_run(tmp_path: Path) -> None:
+    """The rolling part of a log of two ball runs says the fixes of both (it had said the
+    first run's only)."""
+    from bfr_diagnose.preprocess import plan_parts  # noqa: PLC0415 - this test only
+    from bfr_model.io.rig_log import parse_rig_log  # noqa: PLC0415 - this test only
+    from test_rig_log_parser import _synthetic_run  # noqa: PLC0415 - this test only
+
+    runs = [_synthetic_run(900.0, 6, duration=d, t0=4.0) for d in (3.0, 5.0)]
+    log = parse_rig_log(write_rig_log(tmp_path / "two.txt", runs), warn=False)
+    back = [log.recording(k) for k in range(2)]
+    counts = [int(r.new_fix_mask().sum()) for r in back]
+    (kind, _, prep), = plan_parts(back)[0]
+    assert kind == "rolling" and len(prep.info["runs"]) == 2
+    note = prep.info["ball"]
+    assert f"{sum(counts)} fixes" in note and f"per run {counts[0]}, {counts[1]}" in note, note
+    assert f"{counts[0]} fixes" not in note
+
+
 def test_one_rig_many_recordings() -> None:
     """Two recordings of one rig with different sensors: one set of physics, each its own
     sensor timing, the per-recording values beside the joint one, and an interval that
