@@ -206,6 +206,29 @@ def test_frame_held_run_ball_rows_alone() -> None:
     assert mu == pytest.approx(1e-2, rel=0.25)
 
 
+@pytest.mark.parametrize(("phi_dot0", "under"), [(0.0, False), (8.0, True)])
+def test_frame_held_ball_under_the_edge_is_flagged(phi_dot0: float, under: bool) -> None:
+    """The frame held and the ball thrown over the wing and round under the frame (the
+    rigid model's contact holds it there; a real ball would fall): the notes say that its
+    path needs a negative normal force, how much and where first, instead of fitting it
+    silently. A ball rolling in the valley on top is not flagged."""
+    base = RigParams()
+    rec = held_frame_recording(base, SynthConfig(duration=6.0, camera_rate=165.0),
+                               np.random.default_rng(2), theta=0.0, phi0=0.3,
+                               phi_dot0=phi_dot0)
+    s = diagnose_recording(rec, base, DiagnoseOptions(max_effects=0, block=BLOCK,
+                                                      null=False)).summary
+    assert s["frame_held"]
+    g = s["recordings"][0]["grip"]
+    notes = [n for n in s["notes"] if "normal force <= 0" in n]
+    assert ("under_edge" in g) == under and bool(notes) == under, g
+    if under:
+        assert g["under_edge"]["fraction"] > 0.1 and g["under_edge"]["normal_force_min"] < 0
+        assert "passed under the frame's edge" in notes[0] and "first at t = " in notes[0]
+    else:
+        assert g["friction_demand"]["normal_force_min"] > 0.5 * 9.81 * base.ball.mass
+
+
 def test_several_short_runs_used_together(tmp_path: Path) -> None:
     """A log of six 0.8-s runs (clock restarts) is diagnosed with every run, the friction
     found from them together."""

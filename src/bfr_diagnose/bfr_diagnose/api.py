@@ -444,6 +444,8 @@ def _notes(suspects: dict[str, str], results: list[PartResult],
                        "rows alone are analysed (contour, rolling radius, the ball's inertia, "
                        "rolling resistance; nothing of the frame's drive).")
         g = pr.summary.get("grip", {})
+        if "under_edge" in g:
+            out.append(f"{pr.name}: {g['under_edge']['meaning']}.")
         if g.get("verdict") == "slips":
             out.append(f"{pr.name}: {g['meaning']}.")
         n_runs = len(pr.prep.info.get("runs", [])) or 1
