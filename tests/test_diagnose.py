@@ -267,6 +267,22 @@ def test_ball_note_of_a_multi_run_log_counts_every_run(tmp_path: Path) -> None:
     assert f"{counts[0]} fixes" not in note
 
 
+def test_two_rigs_diagnosed_together_are_said_to_disagree() -> None:
+    """Recordings of two rigs (torque offsets -1.2e-3 and +1.2e-3 N m) diagnosed together:
+    the joint fit is a compromise, and a note names the parameter and the recordings (it had
+    passed as one rig's spread). Measured: z = 11.3 (per recording -1.20e-3 +- 1.3e-4 and
+    1.20e-3 +- 1.7e-4 N m)."""
+    a = _rec({"actuator.torque_offset": -1.2e-3}, 21)
+    b = _rec({"actuator.torque_offset": 1.2e-3}, 22)
+    opts = DiagnoseOptions(max_effects=1, block=BLOCK, null=False, only=["torque_offset"])
+    s = diagnose_recordings([("rig_a", [a]), ("rig_b", [b])], RigParams(), opts).summary
+    assert s["effects"] == ["torque_offset"]
+    (d,) = s["between_recordings"]["disagree"]
+    assert (d["effect"], d["name"]) == ("torque_offset", "tau_0") and d["z"] > 8
+    (note,) = [n for n in s["notes"] if n.startswith("the recordings disagree on")]
+    assert "torque_offset.tau_0" in note and "rig_a: " in note and "rig_b: " in note
+
+
 def test_one_rig_many_recordings() -> None:
     """Two recordings of one rig with different sensors: one set of physics, each its own
     sensor timing, the per-recording values beside the joint one, and an interval that
@@ -278,6 +294,7 @@ def test_one_rig_many_recordings() -> None:
                             DiagnoseOptions(max_effects=1, block=BLOCK))
     s = d.summary
     assert s["effects"] == ["joint_coulomb_friction"]
+    assert s["between_recordings"]["disagree"] == []  # one rig: its recordings agree
     sens = {(r["recording"], r["name"]): r["value"] for r in s["sensor_timing"]}
     assert sens[("a", "torque_delay")] == pytest.approx(1e-3, abs=3e-4)
     assert sens[("b", "torque_delay")] == pytest.approx(-1e-3, abs=3e-4)
