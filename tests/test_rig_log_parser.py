@@ -207,7 +207,7 @@ def test_extra_or_missing_field_names_the_counts_and_the_line(bad: str, found: i
     assert any(w.startswith("mem:4: malformed data line skipped: ") and what in w
                and expect in w for w in log.warnings), log.warnings
     (action,) = log.runs[0].account.actions
-    assert action.startswith("corrupt: 1 line(s) skipped, first at line 4 (line 4: ")
+    assert action.startswith("corrupt: 1 line(s) skipped, first at line 4 (malformed: ")
     assert expect in action and what in action
 
 

@@ -428,7 +428,7 @@ class _LogScan:
         target = rows or self.current
         target.lost.setdefault(cause, []).append(lineno)
         if detail:
-            target.details.setdefault(cause, f"line {lineno}: {reason}, {detail}")
+            target.details.setdefault(cause, f"{reason}: {detail}")
 
     def add_info(self, msg: str) -> None:
         """Count an ``[inf]`` message: a restart marker, or an event of the current run."""
