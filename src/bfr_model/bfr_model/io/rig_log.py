@@ -15,8 +15,14 @@ line (its numbers go straight into float arrays; the text is never held), each r
 pass the physical gates, and the run's :class:`~bfr_model.io.account.ReadAccount`
 (``RigRun.account``, ``meta["read_account"]``) counts those not used by cause: ``corrupt``
 (a line with keys missing or a value that is not a number, a line cut by another, a line
-so damaged that only most of its keys are left), ``truncated`` (the last line cut off),
-``duplicate``, ``out_of_order``, ``out_of_range``, ``non_finite``.
+so damaged that only most of its keys are left; the first is named with the fields expected
+and found), ``truncated`` (the last line cut off), ``duplicate``, ``out_of_order``,
+``out_of_range``, ``non_finite``. Unparseable lines between two data lines of a run (not
+a prompt after the program stopped) are ``garbage``: not samples, but counted in the
+account and the notes with the first line, and the read refused past 1 % of the lines
+(:mod:`bfr_model.io.account`). LF, CRLF and CR-only (old Mac) line ends are read alike
+(:func:`parse_rig_log`); stamps counting from an epoch are rebased to the run's first
+(:data:`EPOCH_STAMPS`).
 
 The conventions of the format were inferred from the NTNU rig's logs
 (docs/ntnu-rig-conventions.md, ``python -m bfr_model.io.rig_conventions``) and are applied by
@@ -43,8 +49,10 @@ measured on every run (:mod:`bfr_model.io.timing`) and reported in
   x, y; defined before the rig's phi estimator initialises).
 - ``dtheta`` is the servo's velocity estimate; its lag behind the rate of ``theta`` is
   measured per run (:func:`bfr_model.io.timing.velocity_lag`; the NTNU rig: 6.4 ms) and
-  reported, not applied here (the recording keeps the logged values). ``dphi`` is a
-  filtered derivative of ``phi`` updated at each fix.
+  reported, not applied here (the recording keeps the logged values). A NaN ``dtheta`` is
+  a missing velocity sample: the line is kept and its velocity filled between its
+  neighbours (counted in the notes). ``dphi`` is a filtered derivative of ``phi`` updated at
+  each fix.
 
 :func:`format_rig_log` and :func:`write_rig_log` write recordings in the same format (one
 ``initializing hardware`` block per run, numbers with 6 significant digits).
