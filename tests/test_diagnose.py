@@ -206,6 +206,29 @@ def test_frame_held_run_ball_rows_alone() -> None:
     assert mu == pytest.approx(1e-2, rel=0.25)
 
 
+@pytest.mark.parametrize(("phi_dot0", "under"), [(0.0, False), (8.0, True)])
+def test_frame_held_ball_under_the_edge_is_flagged(phi_dot0: float, under: bool) -> None:
+    """The frame held and the ball thrown over the wing and round under the frame (the
+    rigid model's contact holds it there; a real ball would fall): the notes say that its
+    path needs a negative normal force, how much and where first, instead of fitting it
+    silently. A ball rolling in the valley on top is not flagged."""
+    base = RigParams()
+    rec = held_frame_recording(base, SynthConfig(duration=6.0, camera_rate=165.0),
+                               np.random.default_rng(2), theta=0.0, phi0=0.3,
+                               phi_dot0=phi_dot0)
+    s = diagnose_recording(rec, base, DiagnoseOptions(max_effects=0, block=BLOCK,
+                                                      null=False)).summary
+    assert s["frame_held"]
+    g = s["recordings"][0]["grip"]
+    notes = [n for n in s["notes"] if "normal force <= 0" in n]
+    assert ("under_edge" in g) == under and bool(notes) == under, g
+    if under:
+        assert g["under_edge"]["fraction"] > 0.1 and g["under_edge"]["normal_force_min"] < 0
+        assert "passed under the frame's edge" in notes[0] and "first at t = " in notes[0]
+    else:
+        assert g["friction_demand"]["normal_force_min"] > 0.5 * 9.81 * base.ball.mass
+
+
 def test_several_short_runs_used_together(tmp_path: Path) -> None:
     """A log of six 0.8-s runs (clock restarts) is diagnosed with every run, the friction
     found from them together."""
@@ -226,6 +249,40 @@ def test_several_short_runs_used_together(tmp_path: Path) -> None:
     assert s["effects"] == ["joint_coulomb_friction"], s["effects"]
 
 
+def test_ball_note_of_a_multi_run_log_counts_every_run(tmp_path: Path) -> None:
+    """The rolling part of a log of two ball runs says the fixes of both (it had said the
+    first run's only)."""
+    from bfr_diagnose.preprocess import plan_parts  # noqa: PLC0415 - this test only
+    from bfr_model.io.rig_log import parse_rig_log  # noqa: PLC0415 - this test only
+    from test_rig_log_parser import _synthetic_run  # noqa: PLC0415 - this test only
+
+    runs = [_synthetic_run(900.0, 6, duration=d, t0=4.0) for d in (3.0, 5.0)]
+    log = parse_rig_log(write_rig_log(tmp_path / "two.txt", runs), warn=False)
+    back = [log.recording(k) for k in range(2)]
+    counts = [int(r.new_fix_mask().sum()) for r in back]
+    (kind, _, prep), = plan_parts(back)[0]
+    assert kind == "rolling" and len(prep.info["runs"]) == 2
+    note = prep.info["ball"]
+    assert f"{sum(counts)} fixes" in note and f"per run {counts[0]}, {counts[1]}" in note, note
+    assert f"{counts[0]} fixes" not in note
+
+
+def test_two_rigs_diagnosed_together_are_said_to_disagree() -> None:
+    """Recordings of two rigs (torque offsets -1.2e-3 and +1.2e-3 N m) diagnosed together:
+    the joint fit is a compromise, and a note names the parameter and the recordings (it had
+    passed as one rig's spread). Measured: z = 11.3 (per recording -1.20e-3 +- 1.3e-4 and
+    1.20e-3 +- 1.7e-4 N m)."""
+    a = _rec({"actuator.torque_offset": -1.2e-3}, 21)
+    b = _rec({"actuator.torque_offset": 1.2e-3}, 22)
+    opts = DiagnoseOptions(max_effects=1, block=BLOCK, null=False, only=["torque_offset"])
+    s = diagnose_recordings([("rig_a", [a]), ("rig_b", [b])], RigParams(), opts).summary
+    assert s["effects"] == ["torque_offset"]
+    (d,) = s["between_recordings"]["disagree"]
+    assert (d["effect"], d["name"]) == ("torque_offset", "tau_0") and d["z"] > 8
+    (note,) = [n for n in s["notes"] if n.startswith("the recordings disagree on")]
+    assert "torque_offset.tau_0" in note and "rig_a: " in note and "rig_b: " in note
+
+
 def test_one_rig_many_recordings() -> None:
     """Two recordings of one rig with different sensors: one set of physics, each its own
     sensor timing, the per-recording values beside the joint one, and an interval that
@@ -237,6 +294,7 @@ def test_one_rig_many_recordings() -> None:
                             DiagnoseOptions(max_effects=1, block=BLOCK))
     s = d.summary
     assert s["effects"] == ["joint_coulomb_friction"]
+    assert s["between_recordings"]["disagree"] == []  # one rig: its recordings agree
     sens = {(r["recording"], r["name"]): r["value"] for r in s["sensor_timing"]}
     assert sens[("a", "torque_delay")] == pytest.approx(1e-3, abs=3e-4)
     assert sens[("b", "torque_delay")] == pytest.approx(-1e-3, abs=3e-4)

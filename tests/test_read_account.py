@@ -38,6 +38,7 @@ from bfr_model.recording import Recording
 from bfr_tools.read import main as read_main
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_rig_log_parser import body
 
 DATA = Path(os.environ.get("BFR_RIG_DATA", Path(__file__).resolve().parents[1].parent
                            / "shared" / "data" / "ntnu-rig"))
@@ -156,7 +157,9 @@ def data_lines(text: str) -> int:
     """Independent count of the data lines a rig log's text holds (whole, cut or damaged).
 
     A line counts once per ``[inf] t=`` in it, or once when it holds most of a data line's
-    keys (a damaged prefix), or when it is the unfinished last line and a prefix of one.
+    keys (a damaged prefix) unless it is the rest of a data line cut off by a line end on
+    the line before (counted there), or when it is the unfinished last line and a prefix of
+    one.
     """
     lines = text.split("\n")
     ends = text.endswith("\n")
@@ -165,9 +168,11 @@ def data_lines(text: str) -> int:
     n = 0
     for i, line in enumerate(lines):
         k = line.count("[inf] t=")
+        prev = lines[i - 1] if i else ""
+        cut_before = "[inf] t=" in prev and ",y=" not in prev.rsplit("[inf] t=", 1)[1]
         if k:
             n += k
-        elif sum(key in line for key in _LATER) >= 4:
+        elif sum(key in line for key in _LATER) >= 4 and not cut_before:
             n += 1
         elif i == len(lines) - 1 and not ends and line.strip() and "[inf] t=".startswith(
                 line.strip()):
@@ -207,10 +212,46 @@ def test_mutated_rig_logs_are_accounted(tmp_path: Path, log_excerpts: dict[str, 
     code2, out2, err2 = run_read(str(path), "--json")
     again = check_outcome(code2, out2, err2)
     if accounts is not None:
-        lost = ReadAccount.combine(ReadAccount.from_json(a) for a in accounts).lost_fraction
-        assert (again is not None) == (lost <= LOSS_LIMIT), (m, err2)
+        both = ReadAccount.combine(ReadAccount.from_json(a) for a in accounts)
+        ok = both.lost_fraction <= LOSS_LIMIT and both.garbage_fraction <= LOSS_LIMIT
+        assert (again is not None) == ok, (m, err2)
         if again is None:
-            assert "more than 1 % lost: refused" in err2
+            assert re.search(r"more than 1 % (lost|of the lines among the data are "
+                             r"unparseable): refused", err2)
+
+
+def test_garbage_among_data_lines_is_counted_named_and_refused_past_one_percent(
+        tmp_path: Path) -> None:
+    """Unparseable lines between data lines (not a prompt after the program stopped) are
+    counted in the account and the notes with the first line; past 1 % of the lines the
+    read is refused in one line (exit 2), --allow-partial reads it."""
+    rows = body(400)
+    rows[150:150] = ["\x07#%&/garbled/(=?", "q8Z>>v\x7f"]  # lines 151 and 152
+    text = "\n".join([*rows, "[inf] stopped", "butterfly@nuc:~$ ./run.sh"]) + "\n"
+    path = tmp_path / "few.txt"
+    path.write_text(text)
+    code, out, err = run_read(str(path), "--json")
+    (acc,) = check_outcome(code, out, err)
+    assert acc["garbage"] == 2 and acc["samples_used"] == 400
+    assert any("garbage: 2 unparseable line(s)" in a and "first at line 151" in a
+               for a in acc["actions"])
+    assert "2 unparseable line(s) among the data lines (0.50 % of them)" in err
+    rec = read_recording(path)
+    assert any("2 unparseable line(s)" in n and "first at line 151" in n
+               for n in rec.meta["notes"])
+    assert rec.meta["skipped"] == {"garbage": 2, "info": 1, "terminal": 1}
+
+    rows = body(400)
+    for k in range(5):
+        rows.insert(60 * (k + 1), f"~~~ noise {k} ~~~")
+    path = tmp_path / "many.txt"
+    path.write_text("\n".join(rows) + "\n")
+    code, out, err = run_read(str(path), "--json")
+    assert check_outcome(code, out, err) is None
+    assert "5 unparseable line(s)" in err and "of the lines among the data are unparseable: " \
+        "refused" in err
+    code, out, err = run_read(str(path), "--json", "--allow-partial")
+    assert check_outcome(code, out, err)[0]["garbage"] == 5
 
 
 # -- CSV ------------------------------------------------------------------------------------

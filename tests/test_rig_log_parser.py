@@ -82,6 +82,33 @@ def test_truncated_final_line_warns_from_file(tmp_path: Path) -> None:
     assert len(rec) == 10
 
 
+@pytest.mark.parametrize("end", ["\r", "\n", "\r\n"])
+def test_cr_lf_and_crlf_line_ends_read_alike(tmp_path: Path, end: str) -> None:
+    """A log with CR-only line ends (old Mac style) reads as its LF and CRLF twins: no
+    'truncated final line', every sample, the same account; the CR read is said."""
+    noise = [n for n in NOISE if "\r" not in n.rstrip("\r")]  # no terminal overwrite
+    rows = [r.rstrip("\r") for r in [*noise, *body(30), "[inf] stopped"]]
+    text = end.join(rows) + end
+    p = tmp_path / "log.txt"
+    p.write_bytes(text.encode())
+    for log in (parse_rig_log(p), parse_rig_log_text(text, str(p))):
+        assert log.warnings == [] and log.n_data == 30 and log.n_lines == len(rows)
+        assert log.skipped == {"terminal": 2, "info": 3}
+        rec = log.recording()
+        assert rec.n == 30 and rec.meta["read_account"]["dropped"] == {}
+        said = [c for c in rec.meta["conversions"] if "carriage return" in c]
+        assert bool(said) == (end == "\r"), rec.meta["conversions"]
+
+
+def test_data_lines_joined_by_a_carriage_return_are_each_read() -> None:
+    """Two data lines joined by CR (an LF lost, or CR line ends inside an LF file): a
+    terminal's overwrite had shown the second only, and the first was lost uncounted."""
+    rows = body(10)
+    rows[4:6] = [rows[4] + "\x0b" + rows[5]]  # the LF after line 5 became a VT
+    log = parse_rig_log_text("\n".join(rows) + "\n", "mem")
+    assert log.n_data == 10 and log.runs[0].account.samples_used == 10
+
+
 def test_partial_line_mid_file_is_skipped_with_warning() -> None:
     rows = body(10)
     rows.insert(5, "[inf] t=4.0045,torque=0.0")
@@ -144,7 +171,7 @@ def test_malformed_input_errors(text: str, message: str) -> None:
                                                 r"key\(s\) 'phi'"),
     ("\n".join([*body(3), line(4.1, theta=float("nan")), *body(3, 4.2)]), "non_finite", 1,
      None),
-    ("\n".join([*body(3), line(4.1, dtheta=float("nan")), *body(3, 4.2)]), "non_finite", 1,
+    ("\n".join([*body(3), line(4.1, dtheta=float("inf")), *body(3, 4.2)]), "non_finite", 1,
      None),
     ("\n".join([*body(3), line(4.1).replace("theta=1", "theta=1.0.2"), *body(3, 4.2)]),
      "corrupt", 1, r"mem:4: value of 'theta' is not a number: '1.0.2'"),
@@ -164,6 +191,40 @@ def test_bad_lines_are_accounted(text: str, cause: str, count: int,
     assert any(a.startswith(cause) and f"line {line_no}" in a for a in acc.actions)
     if warning is not None:
         assert any(re.search(warning, w) for w in log.warnings)
+
+
+@pytest.mark.parametrize(("bad", "found", "what"), [
+    (line(4.1).replace("\r", ",z=3\r"), 9, "unknown key(s) 'z'"),
+    (line(4.1).replace(",dphi=0.4", ""), 7, "missing key(s) 'dphi'"),
+    (line(4.1).replace("\r", ",x=0.02\r"), 9, "keys out of order or repeated"),
+])
+def test_extra_or_missing_field_names_the_counts_and_the_line(bad: str, found: int,
+                                                              what: str) -> None:
+    """A line with a field too many or too few says how many were expected and found, and
+    where: in the warning and in the account's action."""
+    log = parse_rig_log_text("\n".join([*body(3), bad, *body(3, 4.2)]) + "\n", "mem")
+    expect = f"{found} field(s) found where 8 expected"
+    assert any(w.startswith("mem:4: malformed data line skipped: ") and what in w
+               and expect in w for w in log.warnings), log.warnings
+    (action,) = log.runs[0].account.actions
+    assert action.startswith("corrupt: 1 line(s) skipped, first at line 4 (malformed: ")
+    assert expect in action and what in action
+
+
+def test_seconds_used_never_exceed_seconds_present_with_duplicated_stamps() -> None:
+    """Lines 2 and 1 ms apart, every other stamp repeated, and one 4 ms pause: the repeats
+    halve the present samples' median interval, and a hole limit from each set alone had
+    counted the pause as covered by the used samples only (used > present by 4 ms)."""
+    t, rows = 4.0, []
+    for i in range(200):
+        t += 0.004 if i == 100 else (0.002 if i % 2 else 0.001)
+        rows.append(line(round(t, 4), theta=1.0 + 0.002 * i))
+        if i % 2:
+            rows.append(rows[-1])  # the stamp repeated (a second loop step in one quantum)
+    acc = parse_rig_log_text("\n".join(rows) + "\n", "mem").runs[0].account
+    assert dict(acc.dropped) == {"duplicate": 100} and acc.samples_used == 200
+    assert acc.seconds_used <= acc.seconds_present
+    assert acc.seconds_used == pytest.approx(acc.seconds_present, abs=1e-9)  # no time lost
 
 
 @pytest.mark.parametrize("x", [1e300, float("inf")])
@@ -374,6 +435,24 @@ def test_ntnu_logs_are_read_at_their_print_resolution() -> None:
         assert rec.meta["theta_resolution"] in (1e-3, 1e-2), path
 
 
+def test_nan_frame_velocity_keeps_the_line() -> None:
+    """A NaN in the servo's velocity column is a missing velocity sample: the line's angle,
+    torque and camera fix are used, theta_dot is filled between its neighbours, and the
+    notes and the account say how many and how."""
+    rows = [line(4.0 + 0.001 * i, theta=1.0 + 0.002 * i, x=0.01 + 0.001 * (i // 5),
+                 dtheta=0.5 + 0.01 * i) for i in range(40)]
+    rows[10] = line(4.010, theta=1.02, x=0.012, dtheta=float("nan"), torque=0.03)
+    rec = parse_rig_log_text("\n".join(rows) + "\n", "mem").recording(0)
+    assert rec.n == 40 and rec.meta["read_account"]["dropped"] == {}
+    assert rec.theta[10] == pytest.approx(1.02 - 2 * np.pi * 0) and rec.torque[10] == 0.03
+    assert rec.new_fix_mask()[10] and rec.ball_x[10] == pytest.approx(0.012)
+    assert rec.theta_dot[10] == pytest.approx(0.6)  # between 0.59 and 0.61
+    assert any(n.startswith("1 sample(s) log dtheta (the servo's velocity) as NaN")
+               and "interpolated linearly" in n for n in rec.meta["notes"])
+    assert any(a.startswith("velocity_missing: 1 line(s)") and a.endswith("line 11")
+               for a in rec.meta["read_account"]["actions"])
+
+
 def test_nan_ball_and_rig_estimates_keep_the_line() -> None:
     """A camera that logs "no ball" as NaN, and NaN in the rig's own phi and dphi: the line's
     encoder and torque are kept (a frame-only recording whose camera writes NaN had lost every
@@ -386,3 +465,31 @@ def test_nan_ball_and_rig_estimates_keep_the_line() -> None:
     assert rec.n == 40
     assert any("NaN: read as no ball" in n for n in rec.meta["notes"])
     assert np.all(np.isfinite(rec.theta)) and np.all(np.isfinite(rec.torque))
+
+
+def test_epoch_stamps_read_as_the_same_log_from_zero(tmp_path: Path) -> None:
+    """Stamps counting from the Unix epoch (t0 = 1.7e9 s) are rebased to the run's first
+    stamp as they are read: the preprocessed timing (fix times on the grid, the camera
+    clock, the frame's rate, the velocity lag) is that of the same log starting at 0 to
+    well under 1 us (before: fix times 1.5 us apart, theta_dot 7e-4 rad/s). Through a whole
+    diagnosis (a clean closed-loop recording, camera 12 ms late) the fitted camera latency
+    moved by 0.604 ms at t0 = 1.7e9 s before, and moves by 12 ns now."""
+    from bfr_diagnose.preprocess import PrepConfig, prepare  # noqa: PLC0415 - diagnosis level
+    from bfr_model.io.rig_log import write_rig_log  # noqa: PLC0415 - local to these tests
+
+    out = []
+    for t0 in (0.0, 1.7e9):
+        rec = _synthetic_run(900.0, 6, duration=6.0, lag=0.004, pair=3, t0=t0)
+        back = read_rig_log(write_rig_log(tmp_path / f"{t0:.0f}.txt", rec, digits=17),
+                            warn=False)
+        assert back.t[0] == 0.0 and back.meta["time_origin_s"] == t0
+        assert any("first stamp" in c for c in back.meta["conversions"]) == (t0 > 0)
+        out.append((back, prepare(back, PrepConfig(), latency0=0.0)))
+    (r0, p0), (r1, p1) = out
+    np.testing.assert_allclose(p1.fixes.tf - p1.t[0], p0.fixes.tf - p0.t[0], rtol=0,
+                               atol=1e-7)
+    np.testing.assert_allclose(p1.theta_dot, p0.theta_dot, rtol=0, atol=1e-5)
+    assert p1.info["camera_clock"]["period_s"] == pytest.approx(
+        p0.info["camera_clock"]["period_s"], rel=1e-8)
+    lag0 = r0.meta["sensor_timing"]["velocity_lag"]["lag_s"]
+    assert r1.meta["sensor_timing"]["velocity_lag"]["lag_s"] == pytest.approx(lag0, abs=1e-6)

@@ -39,6 +39,7 @@ from bfr_diagnose.effects import (
 )
 from bfr_diagnose.grip import grip
 from bfr_diagnose.identify import (
+    DISAGREE_Z,
     Part,
     Problem,
     Selection,
@@ -279,7 +280,9 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
                                         zip(sel.final.effects, sel.final.values, strict=True)
                                         if n not in suspects])
     between = between_recordings(prob, sel) if len(parts) > 1 else {"per_recording": [],
-                                                                     "joint": []}
+                                                                     "joint": [],
+                                                                     "disagree": []}
+    notes = notes + [_disagree_note(d) for d in between.get("disagree", [])]
     say("held-out metrics and short-horizon predictions per recording")
     results = [_part_result(prob, i, sel, sensors0, noises[i], opts, corrected)
                for i in range(len(parts))]
@@ -444,6 +447,8 @@ def _notes(suspects: dict[str, str], results: list[PartResult],
                        "rows alone are analysed (contour, rolling radius, the ball's inertia, "
                        "rolling resistance; nothing of the frame's drive).")
         g = pr.summary.get("grip", {})
+        if "under_edge" in g:
+            out.append(f"{pr.name}: {g['under_edge']['meaning']}.")
         if g.get("verdict") == "slips":
             out.append(f"{pr.name}: {g['meaning']}.")
             out += _slip_against_suspects(pr, suspects)
@@ -471,6 +476,18 @@ def _slip_against_suspects(pr: PartResult, suspects: dict[str, str]) -> list[str
             f"the ball 100 ms ahead better than the selection with its suspects "
             f"({', '.join(suspects)}): {slip:.3g} against {sel:.3g} rad held out; a rolling "
             "model's suspect can be a stand-in for the slip it cannot express."]
+
+
+def _disagree_note(d: dict[str, Any]) -> str:
+    """One note: a parameter whose per-recording values disagree (identify.between_recordings)."""
+    vals = "; ".join(f"{v['recording']}: {v['value']:.4g} +- {1.96 * v['std']:.2g}"
+                     for v in d["values"])
+    return (f"the recordings disagree on {d['effect']}.{d['name']}: {vals} (95 %); "
+            f"{d['recording']} lies {d['z']:.1f} standard deviations from the others (its "
+            f"interval, theirs and their spread; more than {DISAGREE_Z:g} is not chance): "
+            f"they do not measure one value (two rigs, a part changed between them, or a "
+            f"model that fits each differently), and the joint {d['joint_value']:.4g} is a "
+            "compromise. Diagnose them apart to see each.")
 
 
 def _bound_notes(sel: Selection) -> list[str]:

@@ -117,6 +117,13 @@ MAX_STEP = 0.002
 #: Spacing of the training windows [s] (the held-out ones are the predictions' spacing).
 _TRAIN_EVERY = 0.4
 
+#: Share of a frame-held recording's usable samples whose measured ball path needs a normal
+#: force <= 0 beyond which it is flagged: the ball passed under the frame's edge, where the
+#: rolling-on-top model (the rigid model's bilateral contact) cannot hold. One in a hundred,
+#: so that no single noisy sample flags a run; a ball resting or rolling on top is pressed
+#: on with about m g and never comes near.
+UNDER_EDGE_SHARE = 0.01
+
 
 @njit
 def _ball_acc(th, ph, thd, phd, thdd, P, g0, g1, g2, g3, g4, g5, g6, g7):  # noqa: ANN001, ANN202
@@ -431,9 +438,14 @@ def _demand(ball: _Ball, prep: Prepared, phi: FloatArray, phi_dot: FloatArray
                                  np.ascontiguousarray(phi_dot, float), ball.pf,
                                  *ball.model.geom_args, ball.jb, ball.rr, ball.rb)
     good = np.isfinite(mu_req)
+    off = fns <= 0.0
+    lift = ({"lift_off_t_first": float(prep.t[idx[np.argmax(off)]]),
+             "lift_off_phi_deg_first": float(np.degrees(np.mod(phi[idx[np.argmax(off)]],
+                                                               2 * np.pi)))}
+            if off.any() else {})
     if not good.any():
         return {"samples": int(idx.size), "normal_force_min": float(np.min(fns)),
-                "lift_off_fraction": float(np.mean(fns <= 0.0))}
+                "lift_off_fraction": float(np.mean(off)), **lift}
     q_max = int(np.nanargmax(mu_req))
     pct = np.percentile(mu_req[good], [50, 90, 99])
     return {"samples": int(idx.size), "p50": float(pct[0]), "p90": float(pct[1]),
@@ -441,7 +453,7 @@ def _demand(ball: _Ball, prep: Prepared, phi: FloatArray, phi_dot: FloatArray
             "t_max": float(prep.t[idx[q_max]]),
             "phi_max_deg": float(np.degrees(np.mod(phi[idx[q_max]], 2 * np.pi))),
             "normal_force_min": float(np.min(fns)),
-            "lift_off_fraction": float(np.mean(fns <= 0.0))}
+            "lift_off_fraction": float(np.mean(off)), **lift}
 
 
 def _starts(prep: Prepared, mask: NDArray[np.bool_], phi: FloatArray, phi_dot: FloatArray,
@@ -474,6 +486,36 @@ def _flip_test(d: FloatArray) -> float:
     return float((1 + np.sum(signs @ d >= d.sum())) / (1 + FLIPS))
 
 
+def _held_frame_contact(prep: Prepared, corrected: RigParams, sensor: SensorCorrection,
+                        phi: FloatArray, phi_dot: FloatArray) -> dict[str, Any]:
+    """A frame-held recording: no slip test, but whether the ball stayed on the edge.
+
+    The normal force the measured ball path needs (the friction demand's ``F_n``): where it
+    is not positive the ball passed under the frame's edge and only a bilateral contact
+    (the rigid model's) could hold it there; past :data:`UNDER_EDGE_SHARE` of the usable
+    samples ``under_edge`` says how much and where first.
+    """
+    demand = _demand(_Ball.of(corrected, prep, sensor), prep, phi, phi_dot)
+    out: dict[str, Any] = {"verdict": "not tested",
+                           "meaning": "needs a ball on a turning frame",
+                           "friction_demand": demand}
+    share = float(demand.get("lift_off_fraction", 0.0))
+    if share > UNDER_EDGE_SHARE:
+        out["under_edge"] = {
+            "fraction": share, "normal_force_min": demand["normal_force_min"],
+            "t_first": demand["lift_off_t_first"],
+            "phi_deg_first": demand["lift_off_phi_deg_first"],
+            "meaning": (f"the ball's measured path needs a normal force <= 0 on "
+                        f"{100 * share:.1f} % of the usable samples (down to "
+                        f"{demand['normal_force_min']:.3g} N; first at t = "
+                        f"{demand['lift_off_t_first']:.2f} s, phi = "
+                        f"{demand['lift_off_phi_deg_first']:.0f} deg): the ball passed under "
+                        "the frame's edge, where the rolling-on-top model cannot hold (a "
+                        "real ball falls off or is held by something the model lacks); "
+                        "what was fitted there is not this model's physics")}
+    return out
+
+
 def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: SensorCorrection,
          phi: FloatArray, phi_dot: FloatArray, test_mask_t: NDArray[np.bool_],
          horizon: float = 0.1, every: float = 0.2) -> dict[str, Any]:
@@ -504,9 +546,11 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
         randomisation test's p),
         ``verdict`` and ``meaning``.
     """
-    if not prep.has_ball or prep.frame_held:
+    if not prep.has_ball:
         return {"verdict": "not tested",
                 "meaning": "needs a ball on a turning frame"}
+    if prep.frame_held:
+        return _held_frame_contact(prep, corrected, sensor, phi, phi_dot)
     ball = _Ball.of(corrected, prep, sensor)
     demand = _demand(ball, prep, phi, phi_dot)
     out: dict[str, Any] = {"friction_demand": demand}

@@ -137,7 +137,7 @@ from bfr_diagnose.effects import (
 from bfr_diagnose.preprocess import SensorCorrection
 from bfr_diagnose.residual import ResidualEvaluator
 
-__all__ = ["Fit", "LinearScreen", "Part", "Problem", "Selection", "autocorr_time",
+__all__ = ["DISAGREE_Z", "Fit", "LinearScreen", "Part", "Problem", "Selection", "autocorr_time",
            "between_recordings", "effective_samples", "linear_gain", "select_effects"]
 
 FloatArray = NDArray[np.float64]
@@ -1737,15 +1737,22 @@ def between_recordings(prob: Problem, sel: Selection) -> dict[str, Any]:
     its value is kept, its interval is ``None``, its std NaN) or leaves a parameter
     undetermined (standard error above the joint value's range) does not count.
 
+    Each used recording is also set against the others (:func:`_disagreement`): its value
+    minus the others' random-effects mean, over the root of its variance, that mean's and
+    the others' spread ``tau^2``. Beyond :data:`DISAGREE_Z` the parameter is listed in
+    ``disagree``: the recordings do not measure one value (two rigs, a part changed between
+    them, or a model that fits each differently); the joint value is then a compromise.
+
     Returns
     -------
     dict
-        ``per_recording`` (rows: recording, effect, parameter, value, std, used) and
+        ``per_recording`` (rows: recording, effect, parameter, value, std, used),
         ``joint`` (per parameter: value, ci95 of the joint fit, tau, ci95 with the spread,
-        recordings used).
+        recordings used) and ``disagree`` (per parameter whose recordings disagree: the
+        recording farthest from the others, its z, every used recording's value and std).
     """
     if len(prob.parts) < 2 or not sel.chosen:
-        return {"per_recording": [], "joint": []}
+        return {"per_recording": [], "joint": [], "disagree": []}
     rows: list[dict[str, Any]] = []
     chosen = sel.final.chosen()
     for i, part in enumerate(prob.parts):
@@ -1763,11 +1770,61 @@ def between_recordings(prob: Problem, sel: Selection) -> dict[str, Any]:
                 # nothing of the value's spread, so the recording has no interval.
                 r.update(ci95=[None, None], std=float("nan"))
             rows.append({"recording": part.name, **r, "degenerate": degenerate})
-    joint = []
+    joint, disagree = [], []
     for p in sel.parameters:
         mine = [r for r in rows if r["effect"] == p["effect"] and r["name"] == p["name"]]
         joint.append(_random_effects(p, mine))
-    return {"per_recording": rows, "joint": joint}
+        d = _disagreement(p, [r for r in mine if r["used"]])
+        if d is not None:
+            disagree.append(d)
+    disagree.sort(key=lambda d: -d["z"])
+    return {"per_recording": rows, "joint": joint, "disagree": disagree}
+
+
+#: A recording's value this many standard deviations (its own, the others' mean's and their
+#: spread) from the others' flags the parameter (:func:`between_recordings`). Two-sided
+#: p = 6e-7 for one parameter of an honest interval: far beyond chance, and beyond what the
+#: NTNU rig's two rolling logs (fin, Actually_worked: one rig) show at most, 3.3 (the
+#: contour's a).
+DISAGREE_Z = 5.0
+
+
+def _tau2(y: FloatArray, s2: FloatArray) -> float:
+    """DerSimonian-Laird between-recording variance of values ``y`` with variances ``s2``."""
+    if y.size < 2:
+        return 0.0
+    w = 1.0 / s2
+    yw = float(np.sum(w * y) / np.sum(w))
+    q = float(np.sum(w * (y - yw) ** 2))
+    s1, s2w = float(np.sum(w)), float(np.sum(w ** 2))
+    return max(0.0, (q - (y.size - 1)) / max(s1 - s2w / s1, 1e-300))
+
+
+def _disagreement(p: dict[str, Any], use: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The recording of ``use`` farthest from the others' mean, if beyond :data:`DISAGREE_Z`.
+
+    Leave one out: the others' random-effects mean ``m`` (their spread ``tau^2`` from
+    :func:`_tau2`, 0 for a single other) and ``z = |y_i - m| / sqrt(s_i^2 + var(m) +
+    tau^2)``. None with fewer than two recordings or no z beyond the limit.
+    """
+    if len(use) < 2:
+        return None
+    y = np.array([r["value"] for r in use], float)
+    s2 = np.array([r["std"] for r in use], float) ** 2
+    zs = []
+    for i in range(y.size):
+        o = np.arange(y.size) != i
+        t2 = _tau2(y[o], s2[o])
+        w = 1.0 / (s2[o] + t2)
+        m = float(np.sum(w * y[o]) / np.sum(w))
+        zs.append(abs(y[i] - m) / math.sqrt(s2[i] + 1.0 / float(np.sum(w)) + t2))
+    k = int(np.argmax(zs))
+    if zs[k] <= DISAGREE_Z:
+        return None
+    return {"effect": p["effect"], "name": p["name"], "joint_value": p["value"],
+            "z": float(zs[k]), "recording": use[k]["recording"],
+            "values": [{"recording": r["recording"], "value": r["value"], "std": r["std"]}
+                       for r in use]}
 
 
 def _random_effects(p: dict[str, Any], mine: list[dict[str, Any]]) -> dict[str, Any]:

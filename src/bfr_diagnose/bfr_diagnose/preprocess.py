@@ -941,8 +941,8 @@ def stitch(preps: list[Prepared], gap: float = 0.6) -> Prepared:
         noise[k] = float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else float("nan")
     info = dict(preps[0].info)
     info["runs"] = runs
-    info["ball"] = (f"{len(preps)} runs stitched ({gap:.1f} s unusable gaps); "
-                    + str(preps[0].info.get("ball")))
+    info["ball"] = f"{len(preps)} runs stitched ({gap:.1f} s unusable gaps); " + (
+        _ball_note_of_runs(preps) if has_ball else str(preps[0].info.get("ball")))
     lags = [p.info["velocity_lag"] for p in preps if "velocity_lag" in p.info]
     if lags:
         info["velocity_lag_runs"] = lags
@@ -955,6 +955,21 @@ def stitch(preps: list[Prepared], gap: float = 0.6) -> Prepared:
                     ball_ok=cat["ball_ok"],
                     frame_ok=cat["frame_ok"], has_ball=has_ball, frame_held=held,
                     latency0=preps[0].latency0, noise=noise, info=info, fixes=fixes)
+
+
+def _ball_note_of_runs(preps: list[Prepared]) -> str:
+    """The ball note of stitched runs: segments, share and fixes counted over every run.
+
+    Each run's own note (its fixes, its camera timing) is in its ``info["ball"]``; the
+    stitched part's counts all of them (it had repeated the first run's).
+    """
+    fixes = sum(p.fixes.tf.size for p in preps if p.fixes is not None)
+    segs = sum(len(p.fixes.segs) for p in preps if p.fixes is not None)
+    share = sum(int(np.count_nonzero(p.ball_ok)) for p in preps) / sum(p.n for p in preps)
+    span = sum(float(p.t[-1] - p.t[0]) for p in preps)
+    per_run = ", ".join(str(p.fixes.tf.size if p.fixes is not None else 0) for p in preps)
+    return (f"over all {len(preps)} runs: {segs} ball segment(s), {share * 100:.0f} % of "
+            f"their time; {fixes} fixes ({fixes / span:.0f} per second; per run {per_run})")
 
 
 def prepare_runs(recs: list[Recording], cfg: PrepConfig | None = None,

@@ -35,6 +35,22 @@ is only an estimate (a bag cut short with neither summary nor metadata.yaml: wha
 the cut is unknown, so the loss cannot be shown to be small). The rule is applied only
 there.
 
+``garbage`` counts lines found among a run's data lines (after its first, before its last)
+that are neither data nor anything a rig's terminal writes between them (``[inf]`` messages,
+``[obs]`` lines, blank lines): unparseable text. They are not samples (nothing says what
+they held) and are left out of eq. 1-2, but counted and their first named in ``actions``;
+the garbage share ``garbage / (samples_present + garbage)`` is held to the same
+:data:`LOSS_LIMIT`. A rig's own stream writes nothing else between its data lines (the
+NTNU logs: none in ~220,000 lines), so every such line is damage to the file (a transfer or
+disk error, another process writing into the terminal); a few stray ones cost nothing and
+are reported, but past 1 % of the lines the file is not what the rig wrote and the read is
+refused like a loss of samples (``--allow-partial`` reads it anyway).
+
+``seconds_present`` and ``seconds_used`` are both :func:`covered_seconds` with one hole
+limit, that of the samples present, so that ``seconds_used <= seconds_present`` always (a
+limit from the used samples alone moves when duplicates are dropped, and counted a hole of
+the present samples as covered).
+
 Physical gates (:func:`gate_samples`), the same for every reader, in this order:
 
 1. non-finite time, angle, rate or torque: the sample is dropped (``non_finite``);
@@ -84,6 +100,7 @@ __all__ = [
     "covered_seconds",
     "enforce",
     "gate_samples",
+    "hole_limit",
 ]
 
 #: Causes of a dropped sample, in the order they are reported.
@@ -140,6 +157,8 @@ class ReadAccount:
         What was done about each problem, where (line, stamp or byte) it first occurred.
     exact : bool
         False when ``samples_present`` is an estimate (a bag cut without an index).
+    garbage : int
+        Unparseable lines among the data lines [-] (module doc; not samples, not in eq. 1).
     """
 
     source: str
@@ -152,6 +171,7 @@ class ReadAccount:
     degraded: tuple[tuple[str, int], ...] = ()
     actions: tuple[str, ...] = ()
     exact: bool = True
+    garbage: int = 0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "dropped", _counts(self.dropped, CAUSES, "dropped"))
@@ -160,6 +180,8 @@ class ReadAccount:
         if self.samples_used < 0 or self.samples_present < self.samples_used:
             raise ValueError(f"{self.source}: samples used ({self.samples_used}) must lie in "
                              f"[0, samples present = {self.samples_present}]")
+        if self.garbage < 0:
+            raise ValueError(f"{self.source}: garbage lines must be >= 0, got {self.garbage}")
         lost = sum(c for _, c in self.dropped)
         if self.samples_present - self.samples_used != lost:
             raise ValueError(f"{self.source}: account does not balance: {self.samples_present}"
@@ -176,6 +198,12 @@ class ReadAccount:
         """Eq. 2 [-] (0 for an empty source)."""
         return self.lost / self.samples_present if self.samples_present else 0.0
 
+    @property
+    def garbage_fraction(self) -> float:
+        """Unparseable lines among the data lines over those and the samples present [-]."""
+        total = self.samples_present + self.garbage
+        return self.garbage / total if total else 0.0
+
     def line(self) -> str:
         """The account in one line (what every CLI prints on stderr)."""
         secs = (f"{self.seconds_used:.3f} of {self.seconds_present:.3f} s"
@@ -187,6 +215,9 @@ class ReadAccount:
         parts += [f"{c} {name} (kept, ball excluded)" for name, c in self.degraded]
         if parts:
             out += f"; {100 * self.lost_fraction:.2f} % lost: " + ", ".join(parts)
+        if self.garbage:
+            out += (f"; {self.garbage} unparseable line(s) among the data lines "
+                    f"({100 * self.garbage_fraction:.2f} % of them)")
         if self.actions:
             out += "; " + "; ".join(self.actions)
         return out
@@ -199,7 +230,8 @@ class ReadAccount:
                                     else None),
                 "seconds_used": self.seconds_used, "dropped": dict(self.dropped),
                 "degraded": dict(self.degraded), "lost_fraction": self.lost_fraction,
-                "actions": list(self.actions), "exact": self.exact}
+                "actions": list(self.actions), "exact": self.exact,
+                "garbage": self.garbage}
 
     @classmethod
     def from_json(cls, d: dict[str, Any]) -> ReadAccount:
@@ -211,7 +243,7 @@ class ReadAccount:
                    seconds_present=float("nan") if sp is None else float(sp),
                    seconds_used=float(d["seconds_used"]), dropped=d.get("dropped", {}),
                    degraded=d.get("degraded", {}), actions=d.get("actions", ()),
-                   exact=bool(d.get("exact", True)))
+                   exact=bool(d.get("exact", True)), garbage=int(d.get("garbage", 0)))
 
     @classmethod
     def combine(cls, accounts: Iterable[ReadAccount]) -> ReadAccount:
@@ -241,22 +273,39 @@ class ReadAccount:
                    seconds_present=sum(a.seconds_present for a in acc),
                    seconds_used=sum(a.seconds_used for a in acc), dropped=dropped,
                    degraded=degraded, actions=list(actions.values()),
-                   exact=all(a.exact for a in acc))
+                   exact=all(a.exact for a in acc), garbage=sum(a.garbage for a in acc))
 
 
-def covered_seconds(t: NDArray[np.float64], hole: float = 3.0) -> float:
+def hole_limit(t: NDArray[np.float64], hole: float = 3.0) -> float:
+    """The longest interval [s] between samples at times ``t`` that is not a hole.
+
+    ``hole`` times the median positive interval of the sorted finite times (a repeated stamp
+    is no interval); infinite (no holes) when there is none.
+    """
+    t = np.asarray(t, float)
+    t = t[np.isfinite(t)]
+    d = np.diff(np.sort(t))
+    d = d[d > 0]
+    return hole * float(np.median(d)) if d.size else math.inf
+
+
+def covered_seconds(t: NDArray[np.float64], hole: float = 3.0, *,
+                    limit: float | None = None) -> float:
     """Time covered by samples at times ``t`` [s]: their span less the holes in it.
 
-    A hole is an interval longer than ``hole`` times the median interval (a corrupt chunk,
-    a run of dropped lines); the seconds used by a read do not count it.
+    A hole is an interval longer than ``limit`` (default: :func:`hole_limit`, ``hole``
+    times the median interval; a corrupt chunk, a run of dropped lines); the seconds used
+    by a read do not count it. With one ``limit`` for a set of times and a subset of it, the
+    subset never covers more: each of its intervals counted is the sum of the set's
+    intervals inside it, each at most as long (:meth:`GateResult.account`).
     """
     t = np.asarray(t, float)
     t = t[np.isfinite(t)]
     if t.size < 2:
         return 0.0
     d = np.diff(np.sort(t))
-    med = float(np.median(d))
-    return float(np.sum(d[d <= hole * med])) if med > 0 else float(t.max() - t.min())
+    lim = hole_limit(t, hole) if limit is None else float(limit)
+    return float(np.sum(d[d <= lim]))
 
 
 def account_of(rec: Any) -> ReadAccount | None:
@@ -279,6 +328,10 @@ def enforce(account: ReadAccount, allow_partial: bool, limit: float = LOSS_LIMIT
         raise PartialReadError(f"{account.line()}; the source's end is missing and nothing "
                                f"says how many samples it held: refused (--allow-partial uses "
                                f"what was read)")
+    if account.garbage_fraction > limit:
+        raise PartialReadError(f"{account.line()}; more than {100 * limit:g} % of the lines "
+                               f"among the data are unparseable: refused (--allow-partial "
+                               f"uses what was read)")
     if account.lost_fraction <= limit:
         return
     raise PartialReadError(f"{account.line()}; more than {100 * limit:g} % lost: refused "
@@ -366,7 +419,8 @@ class GateResult:
 
     def account(self, *, source: str, kind: str, t: NDArray[np.float64],
                 lines: Sequence[int] | NDArray[np.int64], lost: Mapping[str, Sequence[int]],
-                unit: str) -> ReadAccount:
+                unit: str, details: Mapping[str, str] | None = None,
+                garbage: Sequence[int] = ()) -> ReadAccount:
         """The read's account: the gates' drops plus what the parser skipped before them.
 
         Parameters
@@ -381,21 +435,33 @@ class GateResult:
             Lines skipped by the parser before the gates, by cause (their line numbers).
         unit : str
             What a skipped line is called in the actions ("line", "row").
+        details : mapping of str to str, optional
+            What was wrong with the first line of each cause in ``lost`` (e.g. "9 fields
+            where 8 expected"), added to its action.
+        garbage : sequence of int
+            Line numbers of the unparseable lines among the data lines (module doc).
         """
+        details = details or {}
         dropped = dict(self.dropped)
         for cause, where in lost.items():
             dropped[cause] = dropped.get(cause, 0) + len(where)
         actions = self.actions(lambda i: f"line {lines[i]}")
         actions += [f"{cause}: {len(where)} {unit}(s) skipped, first at line {where[0]}"
+                    + (f" ({details[cause]})" if details.get(cause) else "")
                     for cause, where in lost.items()]
+        if len(garbage):
+            actions.append(f"garbage: {len(garbage)} unparseable {unit}(s) among the data "
+                           f"{unit}s skipped (not samples), first at line {garbage[0]}")
+        tp = t[np.isfinite(t)]
+        limit = hole_limit(tp)  # one limit for both: used <= present (module doc)
         return ReadAccount(
             source=source, kind=kind,
             samples_present=len(lines) + sum(len(w) for w in lost.values()),
             samples_used=int(self.keep.sum()),
-            seconds_present=covered_seconds(t[np.isfinite(t)]),
-            seconds_used=covered_seconds(t[self.keep]),
+            seconds_present=covered_seconds(tp, limit=limit),
+            seconds_used=covered_seconds(t[self.keep], limit=limit),
             dropped=dropped, degraded={"ball_off_frame": int(self.ball_off.sum())},
-            actions=actions)
+            actions=actions, garbage=len(garbage))
 
 
 def _first_of(mask: NDArray[np.bool_], index: NDArray[np.intp]) -> int | None:

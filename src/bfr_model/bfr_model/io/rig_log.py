@@ -15,8 +15,14 @@ line (its numbers go straight into float arrays; the text is never held), each r
 pass the physical gates, and the run's :class:`~bfr_model.io.account.ReadAccount`
 (``RigRun.account``, ``meta["read_account"]``) counts those not used by cause: ``corrupt``
 (a line with keys missing or a value that is not a number, a line cut by another, a line
-so damaged that only most of its keys are left), ``truncated`` (the last line cut off),
-``duplicate``, ``out_of_order``, ``out_of_range``, ``non_finite``.
+so damaged that only most of its keys are left; the first is named with the fields expected
+and found), ``truncated`` (the last line cut off), ``duplicate``, ``out_of_order``,
+``out_of_range``, ``non_finite``. Unparseable lines between two data lines of a run (not
+a prompt after the program stopped) are ``garbage``: not samples, but counted in the
+account and the notes with the first line, and the read refused past 1 % of the lines
+(:mod:`bfr_model.io.account`). LF, CRLF and CR-only (old Mac) line ends are read alike
+(:func:`parse_rig_log`); stamps counting from an epoch are rebased to the run's first
+(:data:`EPOCH_STAMPS`).
 
 The conventions of the format were inferred from the NTNU rig's logs
 (docs/ntnu-rig-conventions.md, ``python -m bfr_model.io.rig_conventions``) and are applied by
@@ -43,8 +49,10 @@ measured on every run (:mod:`bfr_model.io.timing`) and reported in
   x, y; defined before the rig's phi estimator initialises).
 - ``dtheta`` is the servo's velocity estimate; its lag behind the rate of ``theta`` is
   measured per run (:func:`bfr_model.io.timing.velocity_lag`; the NTNU rig: 6.4 ms) and
-  reported, not applied here (the recording keeps the logged values). ``dphi`` is a
-  filtered derivative of ``phi`` updated at each fix.
+  reported, not applied here (the recording keeps the logged values). A NaN ``dtheta`` is
+  a missing velocity sample: the line is kept and its velocity filled between its
+  neighbours (counted in the notes). ``dphi`` is a filtered derivative of ``phi`` updated at
+  each fix.
 
 :func:`format_rig_log` and :func:`write_rig_log` write recordings in the same format (one
 ``initializing hardware`` block per run, numbers with 6 significant digits).
@@ -55,6 +63,8 @@ Pure Python + numpy; no ``rclpy``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import io
 import json
 import math
 import re
@@ -98,6 +108,12 @@ UNITS = {"t": "s", "torque": "N m", "theta": "rad", "phi": "rad", "dtheta": "rad
 #: Largest pairing lag of the log's ``phi`` searched [samples] (:func:`phi_pairing_lag`).
 MAX_PHI_THETA_LAG = 24
 
+#: Stamps beyond this [s] (3.2 years) count from an epoch (Unix time), not from the program's
+#: start: the run's first stamp is subtracted as it is read (the bag reader's rule for
+#: ``time_origin="auto"``). At 1.7e9 s a double resolves 0.24 us, but every fit through the
+#: stamps (a camera clock's line, a lag) then loses digits to the offset.
+EPOCH_STAMPS = 1e8
+
 _DATA_RE = re.compile(
     r"\[inf\] t=([^,]*),torque=([^,]*),theta=([^,]*),phi=([^,]*),"
     r"dtheta=([^,]*),dphi=([^,]*),x=([^,]*),y=([^,]*)")
@@ -135,6 +151,15 @@ class RigRun:
         What the run's lines held and what was used (:mod:`bfr_model.io.account`).
     nan_ball : int
         Kept samples whose ball centre was logged as NaN, read as "no ball" (x = y = 0).
+    garbage : tuple of int
+        Line numbers of the unparseable lines among the run's data lines (skipped; not
+        samples; :class:`~bfr_model.io.account.ReadAccount`'s ``garbage``).
+    nan_dtheta : (int, str)
+        Kept samples whose servo velocity ``dtheta`` was logged as NaN (their angle, torque
+        and fix used), and how their velocity was filled (``data`` holds the filled value).
+    time_origin : float
+        Stamp [s] subtracted from the run's ``t`` column (its first, when the stamps count
+        from an epoch: :data:`EPOCH_STAMPS`; else 0).
     """
 
     data: NDArray[np.float64]
@@ -144,6 +169,9 @@ class RigRun:
     ball_off: NDArray[np.bool_] | None = None
     account: ReadAccount | None = None
     nan_ball: int = 0
+    garbage: tuple[int, ...] = ()
+    nan_dtheta: tuple[int, str] = (0, "")
+    time_origin: float = 0.0
 
     def column(self, key: str) -> NDArray[np.float64]:
         """One raw column by key (see :data:`KEYS`)."""
@@ -171,11 +199,16 @@ class RigLog:
         output), ``info`` (other ``[inf]`` messages), ``obs`` (``[obs]`` lines),
         ``partial`` (a data line cut short by another line), ``truncated_final`` (the last
         line cut off), ``malformed`` (keys missing, unknown or out of order, or a value that
-        is not a number), ``duplicate_time`` (samples dropped for a repeated timestamp).
+        is not a number), ``duplicate_time`` (samples dropped for a repeated timestamp),
+        ``garbage`` (unparseable lines between two data lines of one run: not what a rig
+        writes there; counted in the run's account and notes, the read refused past 1 %).
     warnings : list of str
         Recoverable problems with their line numbers.
     runs : list of RigRun
         Runs in file order.
+    conversions : list of str
+        What was done to the file as a whole (e.g. CR-only line ends read as line ends);
+        added to each recording's ``meta["conversions"]``.
     """
 
     source: str
@@ -184,6 +217,7 @@ class RigLog:
     skipped: dict[str, int]
     warnings: list[str]
     runs: list[RigRun]
+    conversions: list[str] = field(default_factory=list)
 
     def run_index(self, run: int | None) -> int:
         """Resolve a run selector: None is the longest run, negative counts from the end."""
@@ -218,6 +252,7 @@ class RigLog:
             "skipped": dict(self.skipped),
             "parse_warnings": list(self.warnings),
         })
+        rec.meta["conversions"] = list(self.conversions) + rec.meta["conversions"]
         if len(self.runs) > 1:
             rec.meta["notes"].append(
                 f"the log holds {len(self.runs)} runs (clock restarts); run {k} selected")
@@ -235,14 +270,16 @@ def _classify_malformed(line: str) -> tuple[str, str]:
     keys = [p.split("=", 1)[0] for p in parts]
     if len(keys) <= len(KEYS) and keys[:-1] == list(KEYS[: len(keys) - 1]) and \
             KEYS[len(keys) - 1].startswith(keys[-1]):
-        return "partial", f"cut after {len(keys) - 1} complete field(s)"
+        return "partial", (f"cut after {len(keys) - 1} complete field(s) of the "
+                           f"{len(KEYS)} expected")
+    count = f"{len(parts)} field(s) found where {len(KEYS)} expected"
     missing = [k for k in KEYS if k not in keys]
     unknown = [k for k in keys if k not in KEYS]
     if missing:
-        return "malformed", f"missing key(s) {', '.join(map(repr, missing))}"
+        return "malformed", f"missing key(s) {', '.join(map(repr, missing))} ({count})"
     if unknown:
-        return "malformed", f"unknown key(s) {', '.join(map(repr, unknown))}"
-    return "malformed", f"keys out of order or repeated: {keys}"
+        return "malformed", f"unknown key(s) {', '.join(map(repr, unknown))} ({count})"
+    return "malformed", f"keys out of order or repeated: {keys} ({count})"
 
 
 def _clean_terminal_line(line: str) -> str:
@@ -277,12 +314,19 @@ class _RunRows:
         Line numbers of the lines of this run lost before the gates, per account cause
         (``corrupt``: malformed or not a number or cut by another line; ``truncated``: the
         last line cut off).
+    details : dict of str to str
+        What was wrong with the first line lost of each cause (for the account's actions).
+    garbage : list of int
+        Line numbers of unparseable lines among this run's data lines
+        (:class:`~bfr_model.io.account.ReadAccount`'s ``garbage``).
     """
 
     values: array = field(default_factory=lambda: array("d"))
     lines: array = field(default_factory=lambda: array("q"))
     events: list[tuple[int, str]] = field(default_factory=list)
     lost: dict[str, list[int]] = field(default_factory=dict)
+    details: dict[str, str] = field(default_factory=dict)
+    garbage: list[int] = field(default_factory=list)
 
     def __len__(self) -> int:
         """Number of rows."""
@@ -323,6 +367,10 @@ class _LogScan:
         Line number of the latest non-blank line.
     dropped_runs : list of RigRun
         Runs of which the gates kept no sample (accounted, not returned).
+    pending_noise : list of int
+        Line numbers of unrecognised (``terminal``) lines since the current run's latest
+        data line: garbage if another data line of the run follows, else terminal output
+        (a prompt after the program stopped).
     """
 
     source: str
@@ -339,6 +387,13 @@ class _LogScan:
     n_data: int = 0
     last_nonblank: int = 0
     dropped_runs: list[RigRun] = field(default_factory=list)
+    pending_noise: list[int] = field(default_factory=list)
+
+    def add_noise(self, lineno: int) -> None:
+        """Count an unrecognised line: terminal output, or garbage once data follows."""
+        self.skipped["terminal"] += 1
+        if len(self.current) and not self.new_run_pending:
+            self.pending_noise.append(lineno)
 
     def add_data(self, groups: tuple[str, ...], lineno: int) -> None:
         """Append a data row, first starting a new run after a restart marker.
@@ -347,6 +402,12 @@ class _LogScan:
         """
         if self.new_run_pending and len(self.current):
             self.finish_current()
+        if self.pending_noise and not self.new_run_pending:
+            # unrecognised lines between two data lines of one run: garbage, not a prompt
+            self.skipped["terminal"] -= len(self.pending_noise)
+            self.skipped["garbage"] += len(self.pending_noise)
+            self.current.garbage += self.pending_noise
+        self.pending_noise = []
         self.new_run_pending = False
         if self.pending_events:
             self.current.events += [(len(self.current), m) for m in self.pending_events]
@@ -357,24 +418,32 @@ class _LogScan:
             bad = next(k for k, g in zip(KEYS, groups, strict=True) if not _is_float(g))
             msg = (f"{self.source}:{lineno}: value of {bad!r} is not a number: "
                    f"{groups[KEYS.index(bad)]!r}")
-            self.lose("corrupt", "malformed", lineno, msg)
+            self.lose("corrupt", "malformed", lineno, msg,
+                      detail=f"value of {bad!r} is not a number")
             return
         self.n_data += 1
         self.current.values.extend(row)
         self.current.lines.append(lineno)
 
     def lose(self, cause: str, reason: str, lineno: int, warning: str,
-             rows: _RunRows | None = None) -> None:
-        """Count a data line lost before the gates (``cause`` of the account)."""
+             rows: _RunRows | None = None, detail: str = "") -> None:
+        """Count a data line lost before the gates (``cause`` of the account).
+
+        ``detail`` says what was wrong with it (kept for the first line of each cause).
+        """
         self.skipped[reason] += 1
         self.warnings.append(warning)
-        (rows or self.current).lost.setdefault(cause, []).append(lineno)
+        target = rows or self.current
+        target.lost.setdefault(cause, []).append(lineno)
+        if detail:
+            target.details.setdefault(cause, f"{reason}: {detail}")
 
     def add_info(self, msg: str) -> None:
         """Count an ``[inf]`` message: a restart marker, or an event of the current run."""
         self.skipped["info"] += 1
         if msg.startswith(("initializing hardware", "stopped")):
             self.new_run_pending = True
+            self.pending_noise = []
         elif self.new_run_pending:
             self.pending_events.append(msg)
         else:
@@ -388,10 +457,12 @@ class _LogScan:
         self.pending_partial = None
         if final:
             self.lose("truncated", "truncated_final", lineno,
-                      f"{self.source}:{lineno}: truncated final line skipped ({detail})", rows)
+                      f"{self.source}:{lineno}: truncated final line skipped ({detail})", rows,
+                      detail=detail)
         else:
             self.lose("corrupt", "partial", lineno,
-                      f"{self.source}:{lineno}: partial data line skipped ({detail})", rows)
+                      f"{self.source}:{lineno}: partial data line skipped ({detail})", rows,
+                      detail=detail)
 
     def finish_current(self) -> None:
         """Convert, gate and account the run being filled; start a new one."""
@@ -448,15 +519,22 @@ def _scan_data_segments(scan: _LogScan, text: str, lineno: int) -> None:
             scan.pending_partial = (lineno, detail, scan.current)
         elif kind == "partial":
             scan.lose("corrupt", "partial", lineno,
-                      f"{scan.source}:{lineno}: partial data line skipped ({detail})")
+                      f"{scan.source}:{lineno}: partial data line skipped ({detail})",
+                      detail=detail)
         else:
             scan.lose("corrupt", "malformed", lineno,
                       f"{scan.source}:{lineno}: malformed data line skipped: {detail}: "
-                      f"{seg_line[:120]!r}")
+                      f"{seg_line[:120]!r}", detail=detail)
 
 
 def _scan_line(scan: _LogScan, raw: str, lineno: int) -> None:
-    """Sort line ``lineno`` (1-based) into a data row, a run marker or event, or noise."""
+    """Sort line ``lineno`` (1-based) into a data row, a run marker or event, or noise.
+
+    Several data lines joined by carriage returns (CR line ends inside a file of LF ones,
+    or an LF lost) are each read: a terminal overwrites a line's text at a carriage return
+    (what follows the last one is what it shows), but no rig overwrites one data line by
+    another, so there a carriage return ends a line.
+    """
     line = raw[:-1] if raw.endswith("\r") else raw
     m = _DATA_RE.fullmatch(line)
     if m is not None:
@@ -464,17 +542,37 @@ def _scan_line(scan: _LogScan, raw: str, lineno: int) -> None:
         scan.last_nonblank = lineno
         scan.add_data(m.groups(), lineno)
         return
+    if "\r" in line and line.count("[inf] t=") > 1:
+        for piece in line.split("\r"):
+            if piece.strip():
+                _scan_line(scan, piece, lineno)
+        return
     # Slow path: noise, or a data line wrapped in escape codes / carriage returns.
     clean = _clean_terminal_line(line)
+    rest = "[inf] t=" not in clean and _looks_like_data(line)
+    if rest and scan.pending_partial is not None and scan.pending_partial[0] == lineno - 1:
+        # the rest of the data line cut off on the line before (a line end inside it): one
+        # data line lost, not two
+        first, _, rows = scan.pending_partial
+        scan.pending_partial = None
+        scan.last_nonblank = lineno
+        scan.lose("corrupt", "malformed", first,
+                  f"{scan.source}:{first}: data line split over lines {first} and {lineno} "
+                  "skipped", rows, detail=f"split over lines {first} and {lineno}")
+        return
     if clean:
         scan.resolve_partial(final=False)
         scan.last_nonblank = lineno
     m = _DATA_RE.fullmatch(clean)
     if m is not None:
         scan.add_data(m.groups(), lineno)
-    elif "[inf] t=" not in clean and _looks_like_data(line):
+    elif rest:
+        found = sum(k in line for k in _LATER_KEYS)
+        detail = (f"its start '[inf] t=' damaged, {found} of the {len(_LATER_KEYS)} later "
+                  f"keys found")
         scan.lose("corrupt", "malformed", lineno,
-                  f"{scan.source}:{lineno}: damaged data line skipped: {line[:120]!r}")
+                  f"{scan.source}:{lineno}: damaged data line skipped ({detail}): "
+                  f"{line[:120]!r}", detail=detail)
     elif not clean:
         scan.skipped["empty"] += 1
     elif clean.startswith("[obs]"):
@@ -488,7 +586,7 @@ def _scan_line(scan: _LogScan, raw: str, lineno: int) -> None:
     elif "[inf] t=".startswith(clean) and line == clean:
         scan.pending_partial = (lineno, "cut inside the line's prefix", scan.current)
     else:
-        scan.skipped["terminal"] += 1
+        scan.add_noise(lineno)
 
 
 def _finish_run(raw: _RunRows, source: str, duplicates: str,
@@ -514,7 +612,11 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
         data[no_xy, KEYS.index("y")] = 0.0
         col = {k: data[:, j] for j, k in enumerate(KEYS)}
     no_ball = (col["x"] == 0.0) & (col["y"] == 0.0)
-    g = gate_samples(col["t"], col["theta"], col["dtheta"], col["torque"],
+    # a NaN servo velocity is a missing velocity sample, not a missing line: the angle,
+    # torque and fix of the line are good; its dtheta is filled below (_fill_velocity)
+    no_dtheta = np.isnan(col["dtheta"])
+    g = gate_samples(col["t"], col["theta"], np.where(no_dtheta, 0.0, col["dtheta"]),
+                     col["torque"],
                      np.where(no_ball, np.nan, col["x"]), np.where(no_ball, np.nan, col["y"]),
                      rates=(col["dphi"],), gates=gates)
     if g.dropped.get("duplicate") and duplicates == "error":
@@ -525,11 +627,46 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
     keep = g.keep
     events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in raw.events]
     account = g.account(source=source, kind="rig_log", t=col["t"], lines=lines,
-                        lost=raw.lost, unit="line")
-    return RigRun(data=data[keep], lines=lines[keep], events=events,
-                  dropped_duplicates=int(g.dropped.get("duplicate", 0)),
+                        lost=raw.lost, unit="line", details=raw.details, garbage=raw.garbage)
+    kept = data[keep]
+    origin = 0.0
+    if kept.shape[0] and abs(float(kept[0, 0])) > EPOCH_STAMPS:
+        # an epoch clock: its first stamp subtracted now, in double precision (exact: the
+        # stamps lie within a factor 2 of it), before anything fits a line through them
+        origin = float(kept[0, 0])
+        kept[:, 0] -= origin
+    filled = _fill_velocity(kept, no_dtheta[keep])
+    if filled[0]:
+        first = int(lines[keep][no_dtheta[keep]][0])
+        account = dataclasses.replace(account, actions=(
+            *account.actions, f"velocity_missing: {filled[0]} line(s) log dtheta as NaN, "
+                              f"used with theta_dot {filled[1]}, first at line {first}"))
+    return RigRun(data=kept, lines=lines[keep], events=events,
+                  dropped_duplicates=int(g.dropped.get("duplicate", 0)), nan_dtheta=filled,
+                  time_origin=origin,
                   ball_off=g.ball_off[keep], account=account,
-                  nan_ball=int(np.count_nonzero(no_xy[keep])))
+                  nan_ball=int(np.count_nonzero(no_xy[keep])), garbage=tuple(raw.garbage))
+
+
+def _fill_velocity(data: NDArray[np.float64], missing: NDArray[np.bool_]) -> tuple[int, str]:
+    """Fill the missing (NaN) servo velocities of a run's kept rows in place.
+
+    Linear in time between the nearest logged velocities (held at the ends); when the run
+    logs none, the rate of the angle (central differences). Returns how many were filled
+    and how (for the recording's notes).
+    """
+    n = int(np.count_nonzero(missing))
+    if n == 0:
+        return 0, ""
+    t = data[:, KEYS.index("t")]
+    j = KEYS.index("dtheta")
+    have = ~missing
+    if have.any():
+        data[missing, j] = np.interp(t[missing], t[have], data[have, j])
+        return n, "interpolated linearly in time between the nearest logged values"
+    theta = data[:, KEYS.index("theta")]
+    data[:, j] = np.gradient(theta, t) if t.size > 1 else 0.0
+    return n, "the run logs none: the rate of theta (central differences) instead"
 
 
 def _scan(lines: Iterable[str], source: str, duplicates: str,
@@ -592,14 +729,48 @@ def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
     """
     if isinstance(text, bytes):
         text = text.decode("utf-8", errors="replace")
-    lines = text.split("\n")
+    lf = text.count("\n")
+    bare_cr = text.count("\r") - text.count("\r\n")
+    cr_mode = bare_cr > lf
+    lines = re.split(r"\r\n|\r|\n", text) if cr_mode else text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()  # text ended with a newline
-    return _scan(lines, source, duplicates, gates)
+    log = _scan(lines, source, duplicates, gates)
+    if cr_mode:
+        log.conversions.append(_cr_conversion(bare_cr, lf))
+    return log
 
 
-def _file_lines(fh: BinaryIO) -> Iterator[str]:
-    """The lines of a binary file, decoded one by one (UTF-8, bad bytes replaced)."""
+def _cr_conversion(bare_cr: int, lf: int) -> str:
+    """What :func:`parse_rig_log` says when it read carriage returns as line ends."""
+    return (f"line ends: {bare_cr} carriage return(s) alone (CR, old Mac style) and {lf} LF; "
+            "CR, LF and CRLF each read as one line end")
+
+
+def _line_ends(fh: BinaryIO, chunk: int = 1 << 20) -> tuple[int, int]:
+    """``(LF count, count of CR not followed by LF)`` of a binary file, read in chunks."""
+    lf = cr = crlf = 0
+    prev_cr = False
+    while block := fh.read(chunk):
+        lf += block.count(b"\n")
+        cr += block.count(b"\r")
+        crlf += block.count(b"\r\n") + (1 if prev_cr and block[:1] == b"\n" else 0)
+        prev_cr = block[-1:] == b"\r"
+    return lf, cr - crlf
+
+
+def _file_lines(fh: BinaryIO, cr_mode: bool = False) -> Iterator[str]:
+    """The lines of a binary file, decoded one by one (UTF-8, bad bytes replaced).
+
+    ``cr_mode``: CR, LF and CRLF each end a line (a file of CR line ends, old Mac style);
+    else LF ends a line and a carriage return is the terminal's (:func:`_scan_line`).
+    """
+    if cr_mode:
+        text = io.TextIOWrapper(fh, encoding="utf-8", errors="replace", newline=None)
+        for raw_line in text:
+            yield raw_line.rstrip("\n")
+        text.detach()
+        return
     for raw in fh:
         yield raw.rstrip(b"\n").decode("utf-8", errors="replace")
 
@@ -609,7 +780,10 @@ def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
     """Read and parse a rig log file line by line; see :func:`parse_rig_log_text`.
 
     The file is streamed: memory holds the numbers of the runs (8 floats a line), never
-    the text.
+    the text. A first pass counts its line ends: when carriage returns alone outnumber the
+    LFs (a file written with CR line ends, old Mac style), CR, LF and CRLF each end a line
+    (said in ``meta["conversions"]``); else LF ends a line and a carriage return inside one
+    is the terminal's (text after it overwrote text before it).
 
     Parameters
     ----------
@@ -627,7 +801,12 @@ def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
     gates = gates if gates is not None else Gates.from_params()
     try:
         with p.open("rb") as fh:
-            log = _scan(_file_lines(fh), str(p), duplicates, gates)
+            lf, bare_cr = _line_ends(fh)
+            fh.seek(0)
+            cr_mode = bare_cr > lf  # most lines end in CR alone: CR is the line end
+            log = _scan(_file_lines(fh, cr_mode), str(p), duplicates, gates)
+        if cr_mode:
+            log.conversions.append(_cr_conversion(bare_cr, lf))
     except OSError as exc:
         raise RigLogError(f"{p}: cannot read: {exc}") from exc
     if warn:
@@ -873,6 +1052,7 @@ def _rig_log_meta(run: RigRun, t: NDArray[np.float64], *, source: str,
         "notes": notes,
         "units": {"phi_rig": "rad", "dphi_rig": "rad/s", "ball_seen": "-"},
         "first_line": int(run.lines[0]),
+        "time_origin_s": float(run.time_origin),
         "last_line": int(run.lines[-1]),
         "dropped_duplicates": run.dropped_duplicates,
         "events": [(float(t[min(e, n - 1)]), msg) for e, msg in run.events],
@@ -924,6 +1104,19 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     raw = _RigColumns.of(run)
     conversions: list[str] = []
     notes: list[str] = []
+    if run.time_origin:
+        conversions.append(f"t: the run's first stamp {run.time_origin!r} s subtracted (the "
+                           f"stamps count from an epoch, beyond {EPOCH_STAMPS:g} s; in double "
+                           "precision as read, before any fit; meta['time_origin_s'])")
+    if run.nan_dtheta[0]:
+        notes.append(f"{run.nan_dtheta[0]} sample(s) log dtheta (the servo's velocity) as "
+                     "NaN: a missing velocity sample, the line's angle, torque and camera fix "
+                     f"used; theta_dot there {run.nan_dtheta[1]}")
+    if run.garbage:
+        notes.append(f"{len(run.garbage)} unparseable line(s) among the run's data lines "
+                     f"skipped (neither data nor a rig's message), first at line "
+                     f"{run.garbage[0]}; not samples: the read is refused past 1 % of the "
+                     "lines (see meta['read_account'])")
     fixes = _ball_fixes(run, raw, stale_after=stale_after, drop_backlog=drop_backlog,
                         notes=notes)
 
