@@ -95,6 +95,11 @@ _NS = 1_000_000_000
 #: of this computer's (a stamp is the exposure's time, which precedes the arrival): warned.
 STAMP_AHEAD_NS = 2_000_000
 
+#: Logged before the detector's compiled kernels load (bfr_ros.startup: a signal stops this
+#: at once).
+SETTING_UP = ("setting up: the detector's compiled kernels (with a cold numba cache they "
+              "compile: tens of seconds; bfr warm fills it); Ctrl-C stops this at once")
+
 #: Groups of rig.yaml the camera node reads: the ball's size and the frame's contour.
 RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
 
@@ -209,6 +214,7 @@ class CameraNode(Node):
         check(math.isfinite(self.ball_radius) and self.ball_radius > 0, "ball.radius",
               f"{what}: pass --params-file <bfr_model>/config/rig.yaml or -p ball.radius:=<m>")
         self.track = ball_track(params_from_dict({k: p[k] for k in RIG_GROUPS if k in p}))
+        self.get_logger().info(SETTING_UP)
         self.detector = self._make_detector(self.camera)
         warm = self.detector.warm_up()  # the compiled kernels loaded now, not at the 1st fix
         # after the warm-up: a cold compile does not hold a CPU at real-time priority

@@ -108,6 +108,10 @@ MODE_CODES = {WAITING: ControllerState.WAITING, ROLLING: ControllerState.ROLLING
               BALL_LOST: ControllerState.BALL_LOST}
 _RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
 _CTRL_GROUPS = ("constraint", "orbit", "riccati", "control", "estimator", "supervisor")
+#: Logged before the gains and the compiled kernels load (bfr_ros.startup: a signal stops
+#: this at once).
+SETTING_UP = ("setting up: gains and compiled kernels (with a cold numba cache they compile: "
+              "about a minute; bfr warm fills it); Ctrl-C stops this at once")
 
 
 def default_files() -> list[Path]:
@@ -168,6 +172,7 @@ class ControllerNode(Node):
         model = params_from_dict({k: p[k] for k in _RIG_GROUPS})
         config = ControllerConfig.from_dict({k: p[k] for k in _CTRL_GROUPS})
         t0 = time.perf_counter()
+        self.get_logger().info(SETTING_UP)
         self.ctrl = OrbitalController(model, config)
         self._warm_up()
         # after the warm-up: a cold compile does not hold a CPU at real-time priority
