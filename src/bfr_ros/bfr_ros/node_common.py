@@ -796,9 +796,13 @@ def run_nodes(node_factories: Iterable[Callable[[], Any]], argv: list[str] | Non
                 nodes.append(factory())
             if after_start is not None:
                 after_start(nodes)
-        except (ValueError, OSError, RuntimeError) as exc:
-            if stop:  # a consequence of the signal (numba: "no compiled object yet")
+        except Exception as exc:
+            if stop:  # the signal's consequence where Interrupted cannot pass: inside numba's
+                # dispatcher a SystemError ("returned a result with an exception set"), in
+                # llvmlite's callback a RuntimeError ("no compiled object yet")
                 raise Interrupted(stop.signal_name) from None
+            if not isinstance(exc, (ValueError, OSError, RuntimeError)):
+                raise
             print(f"[FATAL] cannot start: {exc}", file=sys.stderr, flush=True)
             for node in reversed(nodes):
                 node.destroy_node()
