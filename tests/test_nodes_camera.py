@@ -183,3 +183,55 @@ def test_camera_node_tracks_rendered_ball(ros_harness: rosutil.RosHarness,
     assert cam.stop() == 0  # SIGINT: a clean exit with the counts
     assert " frames, " in cam.log_path.read_text() and "SIGINT: shutting down" in \
         cam.log_path.read_text()
+
+
+def test_camera_clock_behind_or_ahead_is_warned(ros_harness: rosutil.RosHarness,
+                                                node_processes) -> None:  # noqa: ANN001
+    """A stand-in camera (this test) stamping its images on a clock 0.5 s behind this
+    computer's: invisible before (the stamp is all the node has of the exposure); now one
+    throttled warning, the old images counted and the median age in the exit summary. A
+    clock 50 ms ahead is warned as before; images stamped as they are taken are not."""
+    h = ros_harness
+    pub = h.node.create_publisher(Image, "camera/image_raw", IMAGE_QOS)
+    got: list[BallObservation] = []
+    sub = h.node.create_subscription(BallObservation, "ball_observation", got.append,
+                                     STATE_QOS)
+    cam = node_processes.start("bfr_camera", "camera_node")  # wall clock (no use_sim_time)
+    h.wait_for_match(pub, timeout=60)
+    h.wait_for_match(sub, timeout=30)
+    img = np.zeros((480, 640), np.uint8)
+
+    def send(offset_ns: int, count: int) -> None:
+        for _ in range(count):
+            m = Image()
+            t = h.node.get_clock().now().nanoseconds + offset_ns  # the camera's clock
+            m.header.stamp.sec, m.header.stamp.nanosec = t // NS, t % NS
+            m.header.frame_id = "camera_optical_frame"
+            m.height, m.width, m.encoding, m.step = 480, 640, "mono8", 640
+            m.data = img.tobytes()
+            n = len(got)
+            pub.publish(m)
+            h.spin_until(lambda n=n: len(got) > n, timeout=2.0)  # one at a time (keep last 1)
+
+    send(0, 20)  # right stamps: no warning
+    assert len(got) >= 15, cam.output()[-2000:]
+    h.spin_for(0.3)
+    assert "after its stamp" not in cam.output() and "after it arrived" not in cam.output()
+    send(-500_000_000, 40)  # a clock 0.5 s behind
+    h.spin_for(0.3)
+    out = cam.output()
+    behind = [line for line in out.splitlines() if "after its stamp" in line]
+    assert len(behind) == 1, out[-3000:]  # once (throttled: 5 s)
+    assert "input.max_image_age 100 ms" in behind[0] and "clock is behind" in behind[0]
+    age = float(behind[0].split("image arrived ")[1].split(" ms")[0])
+    assert 500.0 <= age < 600.0, age
+    send(50_000_000, 5)  # a clock 50 ms ahead
+    h.spin_for(0.3)
+    assert "after it arrived: the camera's clock is ahead" in cam.output()
+    assert cam.stop() == 0
+    log = cam.log_path.read_text()
+    summary = next(line for line in log.splitlines() if "image age on arrival" in line)
+    median = float(summary.split("median ")[1].split(" ms")[0])
+    assert 500.0 <= median < 600.0, summary  # 40 of the ~65 images 0.5 s old
+    n_old = int(summary.split("; ")[-1].split(" older than")[0])
+    assert 30 <= n_old <= 40, summary

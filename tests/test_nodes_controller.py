@@ -170,6 +170,10 @@ def test_controller_node_keeps_the_ball_rolling_and_stops_safely(
     rig.joint_state(t_nan, theta=math.nan)
     assert h.spin_until(lambda: rig.states[-1].mode == FAULT, timeout=10.0), ctl.output()[-2000:]
     assert rig.states[-1].torque == 0.0 and rig.cmds[-1] == 0.0
+    # stamped with the sample it derives from (the measurement's time), with its values
+    fault = rig.states[-1]
+    assert rosutil.stamp_ns(fault) == t_nan
+    assert math.isnan(fault.theta) and fault.theta_dot == float(rig.x[2])
     rig.t_ns = t_nan
     for _ in range(4):
         rig.frame(ctl)
@@ -199,9 +203,12 @@ def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
     assert rig.states[-1].mode == WAITING and rig.cmds[-1] == 0.0
     rig.t_ns += MS
     rig.clock(rig.t_ns)
-    rig.joint_state(rig.t_ns - 2 * NS)
+    rig.joint_state(rig.t_ns - 2 * NS, theta=0.25)
     assert h.spin_until(lambda: rig.states[-1].mode == FAULT, timeout=10.0), ctl.output()[-2000:]
     assert rig.cmds[-1] == 0.0
+    # stamped with the stale sample's own stamp, with its values
+    assert rosutil.stamp_ns(rig.states[-1]) == rig.t_ns - 2 * NS
+    assert rig.states[-1].theta == 0.25
     assert "joint_states stamped +2.000 s from the node's clock" in ctl.output()
     # good samples: back to WAITING (joint_states trigger: a step per sample)
     for _ in range(5):
@@ -220,6 +227,10 @@ def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
             break
     assert any(s.mode == FAULT for s in rig.states[n:]), ctl.output()[-2000:]
     assert 0.5 * NS <= rig.t_ns - t_dead <= 1.0 * NS  # watchdog_timeout 0.5 s (+ its period)
+    # no sample to derive it from: stamped with the node's clock at the check, theta unknown
+    dead = next(s for s in rig.states[n:] if s.mode == FAULT)
+    assert t_dead + NS // 2 <= rosutil.stamp_ns(dead) <= rig.t_ns
+    assert math.isnan(dead.theta) and math.isnan(dead.theta_dot)
     assert rig.cmds[-1] == 0.0
     assert "no /joint_states for" in ctl.output() and ctl.alive
     # shutdown: a last zero command, a clean exit

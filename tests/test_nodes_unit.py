@@ -370,8 +370,12 @@ def test_loop_specs_composed_scopes_each_nodes_values() -> None:
     assert two["camera"].ros_args == per["camera"] and two["camera"].rename
     assert loop_specs(per, composed=False, cpu=0)["camera"].ros_args[:2] == [
         "-p", "process.cpu:=0"]
-    with pytest.raises(RigError, match="only -p NAME:=VALUE and --params-file"):
-        loop_specs({"camera": ["-r", "a:=b"], "controller": []}, composed=True, cpu=-1)
+    # remaps reach the composed process once (each node's topics are its own)
+    remapped = loop_specs({"camera": ["-r", "camera/image_raw:=/cam/image_raw"],
+                           "controller": []}, composed=True, cpu=-1)
+    assert remapped["loop"].ros_args[-2:] == ["-r", "camera/image_raw:=/cam/image_raw"]
+    with pytest.raises(RigError, match="only -p NAME:=VALUE, --params-file FILE and -r"):
+        loop_specs({"camera": ["--enclave", "/x"], "controller": []}, composed=True, cpu=-1)
 
 
 def test_loop_layout() -> None:

@@ -1,7 +1,9 @@
 """Build description of the ament_python package ``bfr_tools``.
 
-Executables are console scripts installed into ``lib/bfr_tools/`` (see setup.cfg), so
-``ros2 run bfr_tools <executable>`` finds them. Files in ``config/`` and ``launch/`` are
+The node executables are the scripts in ``scripts/``, installed into ``lib/bfr_tools/``
+(``ros2 run bfr_tools <executable>`` finds them), not console scripts: their first line
+makes SIGINT quiet before any import (bfr_ros.startup). Console scripts (the ``bfr``
+command) go to the same folder (setup.cfg). Files in ``config/`` and ``launch/`` are
 globbed into ``share/bfr_tools/``: new files there are installed without editing this file.
 """
 
@@ -21,8 +23,9 @@ setup(
         ("share/" + package_name + "/config",
          sorted(glob("config/*.yaml") + glob("config/*.json") + glob("config/*.rviz"))),
         ("share/" + package_name + "/launch", sorted(glob("launch/*.py") + glob("launch/*.xml"))),
-        # Keep lib/<package>/ present even before the package registers an executable.
-        ("lib/" + package_name, []),
+        # The node executables: scripts whose first line makes SIGINT quiet
+        # (bfr_ros.startup), installed as lib/<package>/<executable> for ros2 run.
+        ("lib/" + package_name, sorted(glob("scripts/*"))),
     ],
     install_requires=["setuptools"],
     zip_safe=True,
@@ -37,7 +40,6 @@ setup(
         "console_scripts": [
             # "<executable> = bfr_tools.<module>:main",  -> lib/bfr_tools/<executable>
             "bfr = bfr_tools.cli:main",
-            "loop_node = bfr_tools.loop_node:main",
         ],
     },
 )

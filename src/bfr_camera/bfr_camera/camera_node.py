@@ -95,6 +95,15 @@ _NS = 1_000_000_000
 #: of this computer's (a stamp is the exposure's time, which precedes the arrival): warned.
 STAMP_AHEAD_NS = 2_000_000
 
+#: Images in a row older than ``input.max_image_age`` on arrival before a warning: a camera
+#: clock behind makes every image old, a stall of the node (its start) only one or two.
+OLD_IMAGES_WARNED = 3
+
+#: Logged before the detector's compiled kernels load (bfr_ros.startup: a signal stops this
+#: at once).
+SETTING_UP = ("setting up: the detector's compiled kernels (with a cold numba cache they "
+              "compile: tens of seconds; bfr warm fills it); Ctrl-C stops this at once")
+
 #: Groups of rig.yaml the camera node reads: the ball's size and the frame's contour.
 RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
 
@@ -209,6 +218,7 @@ class CameraNode(Node):
         check(math.isfinite(self.ball_radius) and self.ball_radius > 0, "ball.radius",
               f"{what}: pass --params-file <bfr_model>/config/rig.yaml or -p ball.radius:=<m>")
         self.track = ball_track(params_from_dict({k: p[k] for k in RIG_GROUPS if k in p}))
+        self.get_logger().info(SETTING_UP)
         self.detector = self._make_detector(self.camera)
         warm = self.detector.warm_up()  # the compiled kernels loaded now, not at the 1st fix
         # after the warm-up: a cold compile does not hold a CPU at real-time priority
@@ -221,6 +231,12 @@ class CameraNode(Node):
         self.frame_timeout = float(inp["frame_timeout"])
         check(self.frame_timeout > 0, "input.frame_timeout",
               f"must be > 0 s, got {self.frame_timeout}")
+        max_age = float(inp["max_image_age"])
+        check(max_age > 0, "input.max_image_age", f"must be > 0 s, got {max_age}")
+        self.max_age_ns = round(max_age * _NS)
+        self.ages: deque[int] = deque(maxlen=20000)  # arrival - stamp of recent images [ns]
+        self.old_images = 0  # images older than max_image_age on arrival
+        self.old_streak = 0  # of them, in a row up to the newest
         self.obs_pub = self.create_publisher(BallObservation, "ball_observation", STATE_QOS)
         self.markers = MarkerPublisher(self, "ball_markers", float(p["markers"]["rate"]))
         self.detection_pub = (self.create_publisher(ImageMarker, "camera/detection", MARKER_QOS)
@@ -351,6 +367,7 @@ class CameraNode(Node):
             self._invalid(out, f"malformed image message: {exc}", t0)
             return
         ns_to_stamp(msg.stamp_ns, out.header.stamp)
+        self._check_age(msg.stamp_ns, self.last_image_ns)
         self.take_info()
         if not self.calibrated:
             self.stats["uncalibrated"] += 1
@@ -362,12 +379,6 @@ class CameraNode(Node):
             self._invalid(out, err, t0)
             return
         t_ns = msg.stamp_ns
-        ahead = t_ns - self.get_clock().now().nanoseconds
-        if ahead > STAMP_AHEAD_NS and self.throttle("stamp_ahead", 5.0):
-            self.get_logger().warn(
-                f"image stamped {ahead / 1e6:.1f} ms after it arrived: the camera's clock is "
-                "ahead of this computer's, and phi pairs the fix with a later frame angle "
-                "(the angle error is the stamp error times the frame's speed)")
         self.take_joints()
         theta, why = self.theta.theta_at(t_ns)
         det = self.detector.detect(arr, 0.0 if theta is None else theta,
@@ -410,6 +421,41 @@ class CameraNode(Node):
                     self.get_logger().warn(f"no ball position: {det.status.name} "
                                            f"({det.reason})")
         self.last_status = status
+
+    def _check_age(self, t_ns: int, arrival_ns: int) -> None:
+        """The image's age on arrival (``arrival - stamp``): kept, warned if implausible.
+
+        A stamp is the exposure's time, so an image arrives after it by the exposure's half,
+        the readout and the transport. Stamped after its arrival: the camera's clock is
+        ahead of this computer's (more than ``STAMP_AHEAD_NS``); older than
+        ``input.max_image_age`` on arrival, ``OLD_IMAGES_WARNED`` images in a row: the clock
+        is behind (or the images are stuck on the way). Either way phi pairs the fix with
+        the wrong frame angle. Not judged before the node's clock runs (simulated time
+        before the first /clock).
+        """
+        if arrival_ns <= 0:
+            return
+        age = arrival_ns - t_ns
+        self.ages.append(age)
+        if age <= self.max_age_ns:
+            self.old_streak = 0
+        if -age > STAMP_AHEAD_NS and self.throttle("stamp_ahead", 5.0):
+            self.get_logger().warn(
+                f"image stamped {-age / 1e6:.1f} ms after it arrived: the camera's clock is "
+                "ahead of this computer's, and phi pairs the fix with a later frame angle "
+                "(the angle error is the stamp error times the frame's speed)")
+        elif age > self.max_age_ns:
+            self.old_images += 1
+            self.old_streak += 1
+            # a clock behind makes every image old; one or two late ones are a stall (the
+            # node's own start, a busy machine): in the summary, not warned
+            if self.old_streak >= OLD_IMAGES_WARNED and self.throttle("stamp_behind", 5.0):
+                self.get_logger().warn(
+                    f"image arrived {age / 1e6:.1f} ms after its stamp (more than "
+                    f"input.max_image_age {self.max_age_ns / 1e6:g} ms): the camera's clock "
+                    "is behind this computer's, or the images are late, and phi pairs the "
+                    "fix with an earlier frame angle (the angle error is the stamp error "
+                    "times the frame's speed)")
 
     def _publish_markers(self, out: BallObservation, img: RawImage) -> None:
         """The fix as markers (``markers.rate`` Hz of the image stamps; module docstring)."""
@@ -467,6 +513,16 @@ class CameraNode(Node):
         self._invalid(out, f"no image for {gap:.1f} s", time.perf_counter(), counted=True)
         self.last_image_ns = now
 
+    def _describe_ages(self) -> str:
+        """Image age on arrival (arrival - stamp): median and range, and how many were old."""
+        if not self.ages:
+            return "image age on arrival: no image"
+        a = np.sort(np.fromiter(self.ages, dtype=float)) / 1e6
+        return (f"image age on arrival (arrival - stamp) median {a[a.size // 2]:.1f} ms, "
+                f"min {a[0]:.1f}, max {a[-1]:.1f} over the last {a.size} images; "
+                f"{self.old_images} older than input.max_image_age "
+                f"{self.max_age_ns / 1e6:g} ms")
+
     def on_shutdown(self) -> None:
         """Log the counts."""
         s = self.stats
@@ -475,7 +531,7 @@ class CameraNode(Node):
             f"camera: {s['frames']} frames, {s['found']} found, {s['not_found']} not found, "
             f"{s['ambiguous']} ambiguous, {s['invalid']} invalid ({s['missing']} for missing "
             f"images, {s['uncalibrated']} before camera_info); mean processing "
-            f"{1e3 * s['time'] / n:.2f} ms")
+            f"{1e3 * s['time'] / n:.2f} ms; {self._describe_ages()}")
         self.get_logger().info(format_published({self.obs_pub.topic_name: s["published"]}))
         self.js_sub.destroy()
         self.info_sub.destroy()

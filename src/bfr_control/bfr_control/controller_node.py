@@ -60,7 +60,7 @@ import traceback
 from collections import deque
 from collections.abc import Callable, Iterable
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from bfr_model.param_file import check, config_path, nonnegative, one_of
 from bfr_model.params import default_params_path, params_from_dict
@@ -108,6 +108,10 @@ MODE_CODES = {WAITING: ControllerState.WAITING, ROLLING: ControllerState.ROLLING
               BALL_LOST: ControllerState.BALL_LOST}
 _RIG_GROUPS = ("ball", "frame", "environment", "joint", "actuator", "track", "contact")
 _CTRL_GROUPS = ("constraint", "orbit", "riccati", "control", "estimator", "supervisor")
+#: Logged before the gains and the compiled kernels load (bfr_ros.startup: a signal stops
+#: this at once).
+SETTING_UP = ("setting up: gains and compiled kernels (with a cold numba cache they compile: "
+              "about a minute; bfr warm fills it); Ctrl-C stops this at once")
 
 
 def default_files() -> list[Path]:
@@ -122,6 +126,20 @@ def node_defaults() -> dict[str, Any]:
     for path in default_files():
         d.update(load_yaml_parameters(path))
     return d
+
+
+class SampleFault(NamedTuple):
+    """A joint_states sample that puts the controller in FAULT, and what it said.
+
+    ``t_ns`` is the sample's stamp (the measurement's time: the FAULT state is stamped with
+    it), or the node's clock at its arrival when the message cannot be read; ``theta`` and
+    ``theta_dot`` are its values as received (NaN where missing).
+    """
+
+    why: str
+    t_ns: int
+    theta: float = math.nan
+    theta_dot: float = math.nan
 
 
 def guarded(where: str) -> Callable:
@@ -168,6 +186,7 @@ class ControllerNode(Node):
         model = params_from_dict({k: p[k] for k in _RIG_GROUPS})
         config = ControllerConfig.from_dict({k: p[k] for k in _CTRL_GROUPS})
         t0 = time.perf_counter()
+        self.get_logger().info(SETTING_UP)
         self.ctrl = OrbitalController(model, config)
         self._warm_up()
         # after the warm-up: a cold compile does not hold a CPU at real-time priority
@@ -264,15 +283,15 @@ class ControllerNode(Node):
         ctrl.reset()
 
     # -- inputs ----------------------------------------------------------------------------
-    def _parse_joints(self, raw: bytes, now: int) -> tuple[int, float, float] | str | None:
-        """(t_ns, theta, theta_dot), a fault string, or None (another joint's message).
+    def _parse_joints(self, raw: bytes, now: int) -> tuple[int, float, float] | SampleFault | None:
+        """(t_ns, theta, theta_dot), a :class:`SampleFault`, or None (another joint's message).
 
         ``now`` is the node's clock [ns] at the message's arrival (or take).
         """
         try:
             t_ns, names, position, velocity, _ = parse_joint_state(raw)
         except CdrError as exc:
-            return f"malformed message on {self.js_sub.topic_name}: {exc}"
+            return SampleFault(f"malformed message on {self.js_sub.topic_name}: {exc}", now)
         if self.joint_name in names:
             j = names.index(self.joint_name)
         elif not names and len(position) == 1:
@@ -280,15 +299,20 @@ class ControllerNode(Node):
         else:
             return None
         if j >= len(position) or j >= len(velocity):
-            return (f"joint_states for {self.joint_name!r} lack position or velocity "
-                    f"({len(position)} positions, {len(velocity)} velocities)")
+            return SampleFault(
+                f"joint_states for {self.joint_name!r} lack position or velocity "
+                f"({len(position)} positions, {len(velocity)} velocities)", t_ns,
+                float(position[j]) if j < len(position) else math.nan,
+                float(velocity[j]) if j < len(velocity) else math.nan)
         theta, theta_dot = float(position[j]), float(velocity[j])
         if not (math.isfinite(theta) and math.isfinite(theta_dot)):
-            return f"non-finite joint_states sample (theta {theta}, theta_dot {theta_dot})"
+            return SampleFault(f"non-finite joint_states sample (theta {theta}, theta_dot "
+                               f"{theta_dot})", t_ns, theta, theta_dot)
         if now > 0 and abs(now - t_ns) > self.max_age_ns:
-            return (f"joint_states stamped {(now - t_ns) / _NS:+.3f} s from the node's clock "
-                    f"(> {self.max_age_ns / _NS:g} s): stale data or a clock mismatch "
-                    f"(use_sim_time must match the publisher's clock)")
+            return SampleFault(
+                f"joint_states stamped {(now - t_ns) / _NS:+.3f} s from the node's clock "
+                f"(> {self.max_age_ns / _NS:g} s): stale data or a clock mismatch "
+                f"(use_sim_time must match the publisher's clock)", t_ns, theta, theta_dot)
         return t_ns, theta, theta_dot
 
     def _on_exception(self, where: str, exc: Exception) -> None:
@@ -326,8 +350,8 @@ class ControllerNode(Node):
         got = self._parse_joints(raw, now)
         if got is None:
             return
-        if isinstance(got, str):
-            self._enter_fault(got, None)
+        if isinstance(got, SampleFault):
+            self._enter_fault(got.why, got.t_ns, got.theta, got.theta_dot)
             return
         self.js_clock_ns = now
         if self.fault and not self.exception_fault:
@@ -500,7 +524,15 @@ class ControllerNode(Node):
         self.stats["states"] += 1
 
     # -- faults ----------------------------------------------------------------------------
-    def _enter_fault(self, why: str, t_ns: int | None, log: bool = True) -> None:
+    def _enter_fault(self, why: str, t_ns: int | None, theta: float | None = None,
+                     theta_dot: float | None = None, log: bool = True) -> None:
+        """FAULT with zero torque; one ``controller_state`` stamped ``t_ns``.
+
+        ``t_ns``: the time of the measurement the fault derives from (a bad sample's stamp,
+        the node's clock at a watchdog check); None for an exception in a step: the sample
+        that step answered (the node's clock if none yet). ``theta``, ``theta_dot``: the
+        values to report (None: those of the newest good sample).
+        """
         logger = self.get_logger()
         if not self.fault:
             self.stats["faults"] += 1
@@ -514,8 +546,9 @@ class ControllerNode(Node):
         self.exception_fault = False
         if t_ns is None:
             t_ns = self.js[0] if self.js is not None else self.get_clock().now().nanoseconds
-        theta, theta_dot = (self.js[1], self.js[2]) if self.js is not None else (math.nan,
-                                                                                  math.nan)
+        if theta is None or theta_dot is None:
+            theta, theta_dot = (self.js[1], self.js[2]) if self.js is not None else (
+                math.nan, math.nan)
         self._publish(t_ns, 0.0, ControllerState.FAULT, theta, theta_dot, None)
         self.reported_mode = ControllerState.FAULT
 
@@ -531,9 +564,10 @@ class ControllerNode(Node):
                 self.get_logger().warn(f"no joint_states received yet on "
                                        f"{self.js_sub.topic_name}", throttle_duration_sec=10.0)
             return
-        if gap > self.watchdog_timeout:
+        if gap > self.watchdog_timeout:  # stamped now: the check is the measurement
             self._enter_fault(f"no {self.js_sub.topic_name} for {gap:.2f} s of the node's "
-                              f"clock: encoder driver or simulator dead", None)
+                              f"clock: encoder driver or simulator dead", now, math.nan,
+                              math.nan)
 
     def on_shutdown(self) -> None:
         """Publish a last zero command and log the counts."""

@@ -59,6 +59,7 @@ __all__ = [
     "STATE_PUB_QOS",
     "STATE_QOS",
     "CdrError",
+    "Interrupted",
     "PolledSubscription",
     "RawImage",
     "StopFlag",
@@ -616,34 +617,99 @@ def freeze_heap() -> None:
     gc.freeze()
 
 
+class Interrupted(BaseException):
+    """SIGINT/SIGTERM while the process was still starting (raised by :class:`StopFlag`).
+
+    A ``BaseException``, like ``KeyboardInterrupt``: the ``except Exception`` clauses of the
+    code it interrupts (rclpy, numba's compiler) let it through to :func:`run_nodes`.
+    """
+
+
+#: Longest wall time [s] from a signal during the start to the exit. The signal raises
+#: :class:`Interrupted`, which normally ends the start at once; where the main thread was
+#: inside a callback from C (llvmlite calls Python back while numba compiles: an exception
+#: there is printed and ignored) the start would run on to its end (a cold compile: 44 s
+#: measured), so after this grace the process exits from another thread.
+START_STOP_GRACE = 1.0
+
+
 class StopFlag:
-    """Set by SIGINT/SIGTERM (installed by :func:`init_ros`); nodes poll it."""
+    """Set by SIGINT/SIGTERM (installed by :func:`init_ros`); nodes poll it.
+
+    While the process starts (``starting``: until :func:`run_nodes` spins) a signal also
+    raises :class:`Interrupted` in the main thread, so that a start that takes long (a cold
+    numba compile: a minute) stops at once instead of running to its end first; if the
+    start has not stopped within :data:`START_STOP_GRACE` the process exits with status 0
+    (:mod:`bfr_ros.startup`). Once running, a signal only sets the flag.
+    """
 
     def __init__(self) -> None:
         self.event = threading.Event()
         self.signal_name = ""
+        self.starting = True
+        self.stopping = threading.Event()  # set when the shutdown of the nodes begins
 
     def __bool__(self) -> bool:
         return self.event.is_set()
 
     def handler(self, signum: int, frame: Any) -> None:
-        """Signal handler: remember the signal and set the flag."""
+        """Signal handler: remember the signal and set the flag (during the start: raise)."""
         self.signal_name = signal.Signals(signum).name
         self.event.set()
+        if self.starting:
+            self.starting = False  # once: the shutdown that follows is not interrupted
+            threading.Thread(target=self._exit_if_stuck, name="start-stop", daemon=True).start()
+            raise Interrupted(self.signal_name)
+
+    def _exit_if_stuck(self) -> None:
+        """Exit (status 0) if the interrupted start has not reached the shutdown in time."""
+        if not self.stopping.wait(START_STOP_GRACE):
+            os.write(2, f"[INFO] {self.signal_name} while starting: exiting\n".encode())
+            os._exit(0)
+
+    def install(self) -> None:
+        """Handle SIGINT and SIGTERM with :meth:`handler`.
+
+        Also keeps :class:`Interrupted` out of ``sys.unraisablehook``: raised inside a
+        callback from C (llvmlite's, while numba compiles) it cannot propagate, and Python
+        would print it as "Exception ignored ..." with a traceback.
+        """
+        signal.signal(signal.SIGINT, self.handler)
+        signal.signal(signal.SIGTERM, self.handler)
+        default = sys.unraisablehook
+
+        def hook(unraisable: Any) -> None:
+            if not isinstance(unraisable.exc_value, Interrupted):
+                default(unraisable)
+
+        sys.unraisablehook = hook
 
 
-def init_ros(argv: list[str] | None) -> StopFlag:
+def init_ros(argv: list[str] | None, stop: StopFlag | None = None) -> StopFlag:
     """``rclpy.init`` without rclpy's own signal handlers, and ours for SIGINT/SIGTERM.
 
     rclpy's handlers shut the context down at once, so a node could not publish a last
-    zero torque or close its bag; ours only set a flag that the node's loop polls.
+    zero torque or close its bag; ours set a flag that the node's loop polls (and, while
+    the process starts, raise :class:`Interrupted`). They are installed before
+    ``rclpy.init``: no moment is left to Python's ``KeyboardInterrupt``.
+
+    Parameters
+    ----------
+    argv : list of str or None
+        Command line, ROS arguments included.
+    stop : StopFlag, optional
+        The flag to install (a new one when omitted).
 
     Raises
     ------
     bfr_model.param_file.ParameterError
         If rcl cannot parse the command line's ROS arguments or a parameter file (the
         message is rcl's first line, e.g. the file's YAML error).
+    Interrupted
+        If a signal came during ``rclpy.init``.
     """
+    stop = stop if stop is not None else StopFlag()
+    stop.install()
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
@@ -653,9 +719,6 @@ def init_ros(argv: list[str] | None) -> StopFlag:
         where = f" (parameter file{'s' if len(files) > 1 else ''} {', '.join(files)})" \
             if files else ""
         raise ParameterError(f"invalid ROS arguments{where}: {first}") from None
-    stop = StopFlag()
-    signal.signal(signal.SIGINT, stop.handler)
-    signal.signal(signal.SIGTERM, stop.handler)
     return stop
 
 
@@ -714,11 +777,17 @@ def run_nodes(node_factories: Iterable[Callable[[], Any]], argv: list[str] | Non
         Exit status.
     """
     args = list(sys.argv if argv is None else argv)
+    stop = StopFlag()
     try:
-        stop = init_ros(args)
+        init_ros(args, stop)
     except ParameterError as exc:
         print(f"[FATAL] cannot start: {exc}", file=sys.stderr, flush=True)
         return 2
+    except Interrupted:  # a signal during rclpy.init: nothing made yet
+        stop.stopping.set()
+        if rclpy.ok():
+            rclpy.shutdown()
+        return 0
     status = 0
     nodes: list[Any] = []
     try:
@@ -727,7 +796,13 @@ def run_nodes(node_factories: Iterable[Callable[[], Any]], argv: list[str] | Non
                 nodes.append(factory())
             if after_start is not None:
                 after_start(nodes)
-        except (ValueError, OSError, RuntimeError) as exc:
+        except Exception as exc:
+            if stop:  # the signal's consequence where Interrupted cannot pass: inside numba's
+                # dispatcher a SystemError ("returned a result with an exception set"), in
+                # llvmlite's callback a RuntimeError ("no compiled object yet")
+                raise Interrupted(stop.signal_name) from None
+            if not isinstance(exc, (ValueError, OSError, RuntimeError)):
+                raise
             print(f"[FATAL] cannot start: {exc}", file=sys.stderr, flush=True)
             for node in reversed(nodes):
                 node.destroy_node()
@@ -738,14 +813,21 @@ def run_nodes(node_factories: Iterable[Callable[[], Any]], argv: list[str] | Non
             executor.add_node(node)
             node.executor_ref = executor
         freeze_heap()
-        if len(nodes) == 1 and hasattr(nodes[0], "run"):
+        stop.starting = False  # from here a signal sets the flag that the loop polls
+        if stop:
+            pass  # the signal came as the start ended: straight to the shutdown
+        elif len(nodes) == 1 and hasattr(nodes[0], "run"):
             status = int(nodes[0].run(stop) or 0)
         else:
             while not stop and rclpy.ok():
                 executor.spin_once(timeout_sec=poll)
+    except Interrupted:  # stopped while starting: the nodes made so far are shut down below
+        stop.starting = False
     except KeyboardInterrupt:  # pragma: no cover - a second Ctrl-C
         pass
     finally:
+        stop.starting = False
+        stop.stopping.set()
         for node in reversed(nodes):  # each node shut down even if another's shutdown fails
             if stop:
                 node.get_logger().info(f"{stop.signal_name}: shutting down")

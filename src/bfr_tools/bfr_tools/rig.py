@@ -11,7 +11,14 @@ Starts the four nodes as processes exactly as ``ros2 run`` would (the executable
    controller's periodic orbit (``--phase``, ``--d-theta``), runs for ``--duration``
    simulated seconds and exits.
 
-Every node runs with ``use_sim_time:=true`` (the simulator publishes ``/clock``). In
+With ``--hardware`` the rig is real (docs/hardware.md): the simulator is not started; the
+camera and controller nodes (composed, as with ``--realtime``) and the recorder run against
+the hardware's topics (``/joint_states``, ``/effort_controller/commands``, the camera
+driver's ``--image-topic`` and ``--camera-info-topic``) with hardware.yaml and
+``use_sim_time:=false``, for ``--duration`` wall seconds or until Ctrl-C; then they are
+stopped with SIGINT and the run is summarised from the bag, as in the emulated modes.
+
+Otherwise every node runs with ``use_sim_time:=true`` (the simulator publishes ``/clock``). In
 ``--lockstep`` mode (the default) the simulator waits for the controller's answer to every
 camera frame, so a run is repeatable whatever the machine's load; ``--realtime`` paces it by
 the wall clock like the real rig. Each node's output goes to ``<log-dir>/<node>.log``. When
@@ -25,6 +32,8 @@ Examples::
     scripts/bfr rig --duration 40
     scripts/bfr rig --realtime --duration 20 --record /tmp/run1
     scripts/bfr rig -p simulator:ball.mass:=3.1e-3 -p controller:loop.trigger:=joint_states
+    scripts/bfr rig --hardware --camera-params my_camera.yaml --image-topic /cam/image_raw \
+        --camera-info-topic /cam/camera_info --duration 60
 """
 
 from __future__ import annotations
@@ -51,6 +60,7 @@ from bfr_control.controller import load_controller_config
 from bfr_control.orbit import PeriodicOrbit
 from bfr_model.dynamics import RigidModel
 from bfr_model.io.bag import make_typestore, read_bag_messages
+from bfr_model.param_file import config_path
 from bfr_model.params import load_params
 from bfr_ros.domain import claim_domain_id
 from bfr_ros.node_common import parse_published
@@ -250,6 +260,7 @@ def loop_specs(per: Mapping[str, Sequence[str]], *, composed: bool,
         return {n: NodeSpec(n, *NODES[n], [*pin, *per[n]]) for n in ("camera", "controller")}
     values: list[str] = []
     files: list[str] = []
+    remaps: list[str] = []
     for n in ("camera", "controller"):
         args = [*pin, *per[n]]
         for flag, item in zip(args[::2], args[1::2], strict=False):
@@ -257,12 +268,15 @@ def loop_specs(per: Mapping[str, Sequence[str]], *, composed: bool,
                 values += ["-p", f"{n}:{item}"]
             elif flag == "--params-file":
                 files += [] if item in files else [item]
+            elif flag in ("-r", "--remap") and ":=" in item:
+                remaps += [] if item in remaps else [item]
             else:
-                raise RigError(f"{n}: only -p NAME:=VALUE and --params-file FILE can be given "
-                               f"to the composed loop, got {flag} {item}")
+                raise RigError(f"{n}: only -p NAME:=VALUE, --params-file FILE and -r FROM:=TO "
+                               f"can be given to the composed loop, got {flag} {item}")
         if len(args) % 2:
             raise RigError(f"{n}: {args[-1]} without its value")
-    args = [*(a for f in files for a in ("--params-file", f)), *values]
+    args = [*(a for f in files for a in ("--params-file", f)), *values,
+            *(a for r in remaps for a in ("-r", r))]
     return {"loop": NodeSpec("loop", *LOOP_NODE, args, rename=False)}
 
 
@@ -281,7 +295,7 @@ RECORDER_MATCH_TOPICS = ("/ball_observation", "/controller_state", "/effort_cont
 
 
 def _wait_recorder_matched(recorder: NodeSpec, topics: tuple[str, ...],
-                           timeout: float = 30.0) -> bool:
+                           timeout: float = 30.0, then: str = "starting the simulation") -> bool:
     """Wait until the recorder's log says it matched a publisher on each of ``topics``.
 
     A reliable, volatile subscription gets nothing its publisher sent before the two matched,
@@ -301,8 +315,7 @@ def _wait_recorder_matched(recorder: NodeSpec, topics: tuple[str, ...],
             return False
         time.sleep(0.1)
     print(f"bfr rig: note: the recorder had not matched {', '.join(topics)} within "
-          f"{timeout:g} s; starting the simulation anyway (the bag may miss their start)",
-          flush=True)
+          f"{timeout:g} s; {then} anyway (the bag may miss their start)", flush=True)
     return False
 
 
@@ -566,7 +579,9 @@ def format_summary(s: dict[str, Any], wall: tuple[float, float] | None = None) -
         verdict = (f"the ball rolled for {s['rolling_time']:.1f} s (t = {s['rolling_from']:.2f}"
                    f" to {s['rolling_until']:.2f} s), then was lost; final mode "
                    f"{s['final_mode']}")
-    lines.append(f"run: {dur:.2f} s simulated; {verdict}")
+    hardware = s.get("mode") == "hardware"
+    clock = "on the rig's clock" if hardware else "simulated"
+    lines.append(f"run: {dur:.2f} s {clock}; {verdict}")
     src = s.get("mean_phi_dot_source", "")
     lines.append(f"mean phi_dot: {s['mean_phi_dot']:.3f} rad/s ({src})"
                  f"; RMS over the last half of the rolling time: y {s['rms_y']:.2e} rad, "
@@ -576,7 +591,8 @@ def format_summary(s: dict[str, Any], wall: tuple[float, float] | None = None) -
     def wall_rate(rate: float) -> str:
         return f" = {rate * rtf:.0f} Hz of wall time" if rtf else ""
 
-    lines.append(f"control loop: {s['loop_rate']:.1f} Hz in simulated time"
+    lines.append(f"control loop: {s['loop_rate']:.1f} Hz "
+                 f"{'of the rig' if hardware else 'in simulated time'}"
                  f"{wall_rate(s['loop_rate'])}; modes "
                  + ", ".join(f"{k} {v}" for k, v in s["modes"].items()))
     cam = (f"camera: {s['camera_rate']:.1f} Hz{wall_rate(s['camera_rate'])}, "
@@ -589,7 +605,8 @@ def format_summary(s: dict[str, Any], wall: tuple[float, float] | None = None) -
         lines.append(f"simulator: {dur:.1f} s simulated in {wall[0]:.1f} s of wall time "
                      f"(real-time factor {wall[1]:.2f})")
     published = s.get("published", {})
-    lines.append("topics (recorded / published, rate in simulated time):")
+    lines.append("topics (recorded / published, rate "
+                 f"{'on the rig' + chr(39) + 's clock' if hardware else 'in simulated time'}):")
     for topic, d in s["topics"].items():
         pub = published.get(topic)
         both = f"{d['count']:>7} / {pub if pub is not None else '?':>7}"
@@ -609,9 +626,20 @@ def _parser() -> argparse.ArgumentParser:
                            "frame: repeatable whatever the load (default)")
     mode.add_argument("--realtime", dest="mode", action="store_const", const="realtime",
                       help="pace the simulation by the wall clock, like the real rig")
+    mode.add_argument("--hardware", dest="mode", action="store_const", const="hardware",
+                      help="the real rig (docs/hardware.md): no simulator; the camera and "
+                           "controller (and recorder) against the drivers' topics, "
+                           "hardware.yaml, use_sim_time false, for --duration wall seconds "
+                           "or until Ctrl-C")
     p.set_defaults(mode="lockstep")
     p.add_argument("--duration", type=float, default=40.0,
-                   help="simulated seconds [s] (default 40)")
+                   help="simulated seconds [s] (default 40); with --hardware wall seconds")
+    p.add_argument("--image-topic", default="/camera/image_raw",
+                   help="--hardware: the camera driver's image topic (default "
+                        "/camera/image_raw)")
+    p.add_argument("--camera-info-topic", default="/camera/camera_info",
+                   help="--hardware: the camera driver's camera_info topic (default "
+                        "/camera/camera_info)")
     p.add_argument("--record", type=Path, default=None,
                    help="bag directory to write (default: <log-dir>/bag)")
     p.add_argument("--no-record", action="store_true", help="run without the recorder")
@@ -697,17 +725,37 @@ def _node_args(args: argparse.Namespace, log_dir: Path, bag: Path | None,
     return per
 
 
-def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path | None,
-                                               tuple[float, float] | None]:
-    """Run the rig (see the module docstring); returns (summary, log dir, bag, wall stats)."""
-    stamp = datetime.now().strftime("%Y%m%d_%H%M%S")
-    log_dir = args.log_dir or Path("log") / "rig" / stamp
-    log_dir.mkdir(parents=True, exist_ok=True)
-    bag = None if args.no_record else (args.record or log_dir / "bag")
-    if bag is not None and bag.exists():
-        raise RigError(f"{bag} exists already: choose a new --record directory")
-    start = orbit_start(args.phase, args.d_theta, args.rig_params, args.controller_params)
-    per = _node_args(args, log_dir, bag, start)
+def _hardware_args(args: argparse.Namespace, bag: Path | None) -> dict[str, list[str]]:
+    """``--ros-args`` of the camera, controller and recorder on the real rig.
+
+    As docs/hardware.md starts them: the camera's file, rig.yaml, the controller's file, then
+    hardware.yaml (later files override earlier ones), ``use_sim_time:=false``, the camera
+    driver's topics remapped (for the recorder too: it records them under those names).
+    """
+    hw = ["--params-file", str(config_path("bfr_control", "hardware.yaml"))]
+
+    def files(*paths: str | None) -> list[str]:
+        return [a for f in paths if f for a in ("--params-file", str(f))]
+
+    remaps = ["-r", f"camera/image_raw:={args.image_topic}",
+              "-r", f"camera/camera_info:={args.camera_info_topic}"]
+    wall = ["-p", "use_sim_time:=false"]
+    per = {"camera": [*files(args.camera_params, args.rig_params), *hw, *wall, *remaps],
+           "controller": [*files(args.rig_params, args.controller_params), *hw, *wall],
+           "recorder": [*hw, *wall, *remaps]}
+    if bag is not None:
+        per["recorder"] += ["-p", f"recorder.path:={bag}"]
+    for item in args.param:
+        node, sep, assignment = item.partition(":")
+        if not sep or node not in per or ":=" not in assignment:
+            raise RigError(f"-p {item!r}: expected NODE:NAME:=VALUE with NODE one of "
+                           f"{', '.join(per)} (--hardware: no simulator)")
+        per[node] += ["-p", assignment]
+    return per
+
+
+def _environment(args: argparse.Namespace) -> dict[str, str]:
+    """The nodes' environment: this one, unbuffered, plain logs, ``--domain`` applied."""
     env = dict(os.environ)
     env.update(PYTHONUNBUFFERED="1", RCUTILS_COLORIZED_OUTPUT="0")
     if args.domain == "auto":
@@ -717,15 +765,116 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
         if not args.domain.isdigit():
             raise RigError(f"--domain {args.domain!r}: expected 'auto' or a number")
         env["ROS_DOMAIN_ID"] = args.domain
-    composed, cpu = loop_layout(args.mode, args.loop, args.loop_cpu)
-    loop = loop_specs(per, composed=composed, cpu=cpu)
-    order = [n for n in ("recorder", *loop, "simulator") if n != "recorder" or bag is not None]
-    nice = args.nice if args.mode == "realtime" else 0
+    return env
+
+
+def _nice(args: argparse.Namespace) -> int:
+    """The nodes' niceness: ``--nice`` with a wall-clock deadline where permitted, else 0."""
+    nice = args.nice if args.mode in ("realtime", "hardware") else 0
     if nice < 0 and not may_raise_priority(nice):
         print(f"bfr rig: note: raising the nodes' priority (nice {nice}) is not permitted "
               f"here; they run at normal priority and a busy machine may slow the "
               f"simulation down", flush=True)
         nice = 0
+    return nice
+
+
+#: What the camera and controller nodes log once they are up (their start-up lines).
+LOOP_READY = ("camera: images ", "mode WAITING (no ball yet)")
+
+
+def _wait_loop_ready(nodes: dict[str, NodeSpec], timeout: float = 180.0) -> None:
+    """Wait until the camera and controller have logged that they are up.
+
+    A cold numba cache takes a minute: ``--duration`` counts the time they run. Raises
+    RigError if one dies meanwhile.
+    """
+    t0 = time.monotonic()
+    logs = [nodes[n] for n in ("loop", "camera", "controller") if n in nodes]
+    while time.monotonic() - t0 < timeout:
+        text = "".join(n.log_path.read_text(errors="replace") for n in logs
+                       if n.log_path is not None and n.log_path.exists())
+        if all(marker in text for marker in LOOP_READY):
+            return
+        for n in logs:
+            if n.returncode is not None:
+                raise RigError(f"{n.name} node died ({_describe_exit(n.returncode)}); its log "
+                               f"({n.log_path}) ends with:\n{n.tail()}")
+        time.sleep(0.1)
+    print(f"bfr rig: note: the camera and controller were not up within {timeout:g} s; "
+          f"timing the run from now", flush=True)
+
+
+def run_hardware(args: argparse.Namespace, log_dir: Path, bag: Path | None
+                 ) -> tuple[dict[str, Any] | None, Path, Path | None, None]:
+    """``bfr rig --hardware``: the loop (and recorder) on the real rig; see the docstring."""
+    per = _hardware_args(args, bag)
+    env = _environment(args)
+    composed, cpu = loop_layout("realtime", args.loop, args.loop_cpu)
+    loop = loop_specs(per, composed=composed, cpu=cpu)
+    order = [*(["recorder"] if bag is not None else []), *loop]
+    nodes = {n: loop[n] if n in loop else NodeSpec(n, *NODES[n], per[n]) for n in order}
+    nice = _nice(args)
+    print(f"bfr rig: hardware (no simulator), {args.duration:g} s of wall time, images "
+          f"{args.image_topic}, ROS_DOMAIN_ID {env.get('ROS_DOMAIN_ID', '0')}; logs in "
+          f"{log_dir}" + (f"; bag {bag}" if bag else ""), flush=True)
+    failure: str | None = None
+    interrupted = False
+    try:
+        for n in order:
+            nodes[n].start(log_dir, env, nice)
+            print(f"bfr rig: started {n} ({nodes[n].package}/{nodes[n].executable}, pid "
+                  f"{nodes[n].process.pid})", flush=True)  # type: ignore[union-attr]
+        _wait_loop_ready(nodes)
+        if "recorder" in nodes:
+            _wait_recorder_matched(nodes["recorder"], RECORDER_MATCH_TOPICS, timeout=60.0,
+                                   then="timing the run from now")
+        t_run = time.monotonic()
+        print(f"bfr rig: running for {args.duration:g} s (Ctrl-C stops it sooner)", flush=True)
+        while time.monotonic() - t_run < args.duration:
+            time.sleep(0.2)
+            dead = [n for n in order if nodes[n].returncode is not None]
+            if dead:
+                n = dead[0]
+                failure = (f"{n} node died ({_describe_exit(nodes[n].returncode or 0)}); its "
+                           f"log ({nodes[n].log_path}) ends with:\n{nodes[n].tail()}")
+                break
+    except KeyboardInterrupt:
+        interrupted = True
+        print("bfr rig: interrupted; stopping the nodes", flush=True)
+    finally:
+        for n in ("loop", "controller", "camera", "recorder"):
+            if n in nodes:
+                nodes[n].stop()
+    if failure is not None:
+        raise RigError(failure)
+    summary = None
+    if bag is not None and (bag / "metadata.yaml").exists():
+        summary = summarize_bag(bag)
+        summary["mode"] = "hardware"
+        summary["interrupted"] = interrupted
+        summary["published"] = published_counts(nodes)
+    return summary, log_dir, bag, None
+
+
+def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path | None,
+                                               tuple[float, float] | None]:
+    """Run the rig (see the module docstring); returns (summary, log dir, bag, wall stats)."""
+    stamp = datetime.now().strftime("%Y%m%d_%H%M%S")
+    log_dir = args.log_dir or Path("log") / "rig" / stamp
+    log_dir.mkdir(parents=True, exist_ok=True)
+    bag = None if args.no_record else (args.record or log_dir / "bag")
+    if bag is not None and bag.exists():
+        raise RigError(f"{bag} exists already: choose a new --record directory")
+    if args.mode == "hardware":
+        return run_hardware(args, log_dir, bag)
+    start = orbit_start(args.phase, args.d_theta, args.rig_params, args.controller_params)
+    per = _node_args(args, log_dir, bag, start)
+    env = _environment(args)
+    composed, cpu = loop_layout(args.mode, args.loop, args.loop_cpu)
+    loop = loop_specs(per, composed=composed, cpu=cpu)
+    order = [n for n in ("recorder", *loop, "simulator") if n != "recorder" or bag is not None]
+    nice = _nice(args)
     nodes = {n: loop[n] if n in loop else NodeSpec(n, *NODES[n], per[n]) for n in order}
     wall_limit = args.wall_timeout or (
         120.0 + (args.duration * 10.0 if args.mode == "lockstep" else args.duration * 2.0))
