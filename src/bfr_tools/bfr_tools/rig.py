@@ -714,13 +714,22 @@ def _node_args(args: argparse.Namespace, log_dir: Path, bag: Path | None,
         # ping-pong 10-60 % slower here, each answer a wake on the other vCPU)
         for n in ("camera", "controller", "recorder"):
             per[n] += ["-p", "process.realtime_priority:=0"]
+    return _user_params(per, args, bag, "")
+
+
+def _user_params(per: dict[str, list[str]], args: argparse.Namespace, bag: Path | None,
+                 why: str) -> dict[str, list[str]]:
+    """``per`` with the bag's path and the user's ``-p NODE:NAME:=VALUE`` added.
+
+    ``why``: said after the nodes a ``-p`` may name when it names another.
+    """
     if bag is not None:
         per["recorder"] += ["-p", f"recorder.path:={bag}"]
     for item in args.param:
         node, sep, assignment = item.partition(":")
-        if not sep or node not in NODES or ":=" not in assignment:
+        if not sep or node not in per or ":=" not in assignment:
             raise RigError(f"-p {item!r}: expected NODE:NAME:=VALUE with NODE one of "
-                           f"{', '.join(NODES)}")
+                           f"{', '.join(per)}{why}")
         per[node] += ["-p", assignment]
     return per
 
@@ -743,15 +752,7 @@ def _hardware_args(args: argparse.Namespace, bag: Path | None) -> dict[str, list
     per = {"camera": [*files(args.camera_params, args.rig_params), *hw, *wall, *remaps],
            "controller": [*files(args.rig_params, args.controller_params), *hw, *wall],
            "recorder": [*hw, *wall, *remaps]}
-    if bag is not None:
-        per["recorder"] += ["-p", f"recorder.path:={bag}"]
-    for item in args.param:
-        node, sep, assignment = item.partition(":")
-        if not sep or node not in per or ":=" not in assignment:
-            raise RigError(f"-p {item!r}: expected NODE:NAME:=VALUE with NODE one of "
-                           f"{', '.join(per)} (--hardware: no simulator)")
-        per[node] += ["-p", assignment]
-    return per
+    return _user_params(per, args, bag, " (--hardware: no simulator)")
 
 
 def _environment(args: argparse.Namespace) -> dict[str, str]:
