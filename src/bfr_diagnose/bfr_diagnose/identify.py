@@ -1528,10 +1528,8 @@ def _offsets(fit: Fit) -> FloatArray:
 RESOLVED_Z = 5.0
 
 
-def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
-    """Why a joint fit is not identifiable, or None (see :func:`select_effects`)."""
-    if not fit.ok:
-        return "fit failed"
+def _at_bound(prob: Problem, fit: Fit) -> tuple[str, str] | None:
+    """The first effect with a parameter at a bound it did not start at, and why, or None."""
     for name, vals in zip(fit.effects, fit.values, strict=True):
         eff = EFFECTS[name]
         x0 = np.asarray(eff.start(prob.base), float)
@@ -1539,9 +1537,19 @@ def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
         tol = 1e-3 * (hi - lo)
         for j, v in enumerate(np.asarray(vals, float)):
             if v - lo[j] < tol[j] and x0[j] - lo[j] >= tol[j]:
-                return f"{name}.{eff.names[j]} at its lower bound {lo[j]:.3g}"
+                return name, f"{name}.{eff.names[j]} at its lower bound {lo[j]:.3g}"
             if hi[j] - v < tol[j] and hi[j] - x0[j] >= tol[j]:
-                return f"{name}.{eff.names[j]} at its upper bound {hi[j]:.3g}"
+                return name, f"{name}.{eff.names[j]} at its upper bound {hi[j]:.3g}"
+    return None
+
+
+def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
+    """Why a joint fit is not identifiable, or None (see :func:`select_effects`)."""
+    if not fit.ok:
+        return "fit failed"
+    bound = _at_bound(prob, fit)
+    if bound is not None:
+        return bound[1]
     if fit.cov is not None:  # a direction of the Jacobian's null space (see _covariance)
         free = np.nonzero(np.isinf(np.diag(fit.cov))[:fit.n_params])[0]
         if free.size:
@@ -1735,7 +1743,9 @@ def between_recordings(prob: Problem, sel: Selection) -> dict[str, Any]:
     what the spread between recordings adds to the uncertainty of their mean. A
     recording whose own fit is degenerate (a parameter at a bound, two that move together:
     its value is kept, its interval is ``None``, its std NaN) or leaves a parameter
-    undetermined (standard error above the joint value's range) does not count.
+    undetermined (standard error above the joint value's range) does not count. Where one
+    effect runs to a bound (the recording cannot fix it: a bump it never shows), the others
+    are refitted on that recording without it and count with their intervals.
 
     Each used recording is also set against the others (:func:`_disagreement`): its value
     minus the others' random-effects mean, over the root of its variance, that mean's and
@@ -1764,12 +1774,26 @@ def between_recordings(prob: Problem, sel: Selection) -> dict[str, Any]:
         w = prob.part_weighted(i, fit.chosen(), fit.sensors[i]).reshape(len(part.rows), -1)
         tau = max(autocorr_time(r[part.train]) for r in w)
         degenerate = _degenerate(prob, fit, 0.995)
-        for r in parameter_table(fit, tau):
-            if degenerate is not None:
+        table = parameter_table(fit, tau)
+        why = {r["effect"]: degenerate for r in table}
+        bound = _at_bound(prob, fit) if degenerate is not None else None
+        rest = [(e, v) for e, v in mine if bound is None or e.name != bound[0]]
+        if bound is not None and rest:
+            # one effect this recording cannot fix (a parameter at its bound): the others are
+            # refitted without it and keep their intervals if that fit is identifiable
+            refit = prob.fit(rest[:-1], rest[-1][0], rest[-1][1], sel.final.sensors,
+                             max_nfev=25, only_part=i)
+            if _degenerate(prob, refit, 0.995) is None:
+                table = parameter_table(refit, tau) + [r for r in table
+                                                       if r["effect"] == bound[0]]
+                why = {r["effect"]: bound[1] if r["effect"] == bound[0] else None
+                       for r in table}
+        for r in table:
+            if why[r["effect"]] is not None:
                 # A parameter at a bound or two that move together: the curvature there says
                 # nothing of the value's spread, so the recording has no interval.
                 r.update(ci95=[None, None], std=float("nan"))
-            rows.append({"recording": part.name, **r, "degenerate": degenerate})
+            rows.append({"recording": part.name, **r, "degenerate": why[r["effect"]]})
     joint, disagree = [], []
     for p in sel.parameters:
         mine = [r for r in rows if r["effect"] == p["effect"] and r["name"] == p["name"]]
