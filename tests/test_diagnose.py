@@ -532,22 +532,31 @@ def test_real_friction_runs_both_directions_one_rig() -> None:
     assert all(p["ci95"] == [None, None] for p in per)
 
 
-@pytest.mark.parametrize(("rate", "duration", "held", "want"), [
-    (2.6, 10.0, False, 2.0 * math.pi / 2.6),   # one turn, not the default 1.25 s (half)
-    (1.0, 30.0, False, 2.0 * math.pi),         # a friction run: one turn of 6.3 s
-    (8.0, 40.0, False, 6 * 2.0 * math.pi / 8.0),  # the default 5 s is nearest to 6 turns
-    (0.3, 10.0, False, 1.25),                  # half a turn in the run: the default
-    (2.6, 10.0, True, 1.25),                   # a held frame: the default
+@pytest.mark.parametrize(("rate", "ball", "duration", "held", "want"), [
+    (2.6, 0.0, 10.0, False, 2.0 * math.pi / 2.6),   # one turn, not the default 1.25 s (half)
+    (2.3, 0.0, 10.0, False, 2.0 * math.pi / 2.3),   # 3.7 turns: one turn (limits case 366)
+    (1.0, 0.0, 30.0, False, 2.0 * math.pi),         # a friction run: one turn of 6.3 s
+    (8.0, 0.0, 40.0, False, 6 * 2.0 * math.pi / 8.0),  # the default 5 s is nearest to 6 turns
+    (0.3, 0.0, 10.0, False, 1.25),                  # half a turn in the run: the default
+    (2.6, 0.0, 10.0, True, 1.25),                   # a held frame: the default
+    (0.0, 2.4, 10.0, False, 2.0 * math.pi / 2.4),   # a rocking frame, the ball laps it
+    (2.6, -1.6, 20.0, False, 2.0 * math.pi / 1.6),  # the ball's lap is the longer period
 ])
-def test_held_out_blocks_cover_whole_frame_turns(rate: float, duration: float, held: bool,
-                                                 want: float) -> None:
+def test_held_out_blocks_cover_whole_frame_turns_and_ball_laps(
+        rate: float, ball: float, duration: float, held: bool, want: float) -> None:
     """Training and held-out blocks of half a turn see opposite signs of a once-per-turn
-    torque (an imbalance 19x its floor was rejected so): a turning frame gets blocks of
-    whole turns, near an eighth of the run, at least two of each kind."""
+    torque (an imbalance 19x its floor was rejected so), and blocks of half the ball's lap
+    see the ball on opposite halves of the frame (a contour harmonic is then judged on how it
+    extrapolates): blocks are whole turns and whole laps, near an eighth of the run, at least
+    two of training and one held out."""
     t = np.arange(0.0, duration, 2e-3)
-    theta_dot = rate * (1.0 + 0.8 * np.sin(2.0 * np.pi * 0.7 * t))  # reverses now and then
+    wobble = 1.0 + 0.8 * np.sin(2.0 * np.pi * 0.7 * t)  # reverses now and then
+    theta_dot = rate * wobble + (0.5 * np.sin(2.0 * np.pi * 0.9 * t) if rate == 0 else 0.0)
     zeros, ok = np.zeros(t.size), np.ones(t.size, bool)
+    # the ball's angle on the frame is theta + psi_w: its rate minus the frame's
+    psi_w_dot = ball * wobble - theta_dot if ball else zeros
     prep = Prepared(t=t, theta=np.cumsum(theta_dot) * 2e-3, theta_dot=theta_dot,
-                    theta_ddot=zeros, u=zeros, psi_w=zeros, psi_w_dot=zeros, ball_ok=ok,
+                    theta_ddot=zeros, u=zeros, psi_w=np.cumsum(psi_w_dot) * 2e-3,
+                    psi_w_dot=psi_w_dot, ball_ok=ok,
                     frame_ok=ok, has_ball=True, latency0=0.0, frame_held=held)
     assert held_out_block(prep, duration) == pytest.approx(want, rel=2e-3)

@@ -18,8 +18,8 @@ one: it is homogeneous in every torque and inertia it holds (``J_f``, ``k_u``, t
 mass, the friction, offset and imbalance), so a smaller gain with all of them scaled with it
 shrank the row's misfit (limits case 449: a frame inertia +14 % taken for a torque gain
 0.88 and a ball mass 0.87 x, whose frame row was 0.88 of the truth's). Alternating time blocks of
-``block`` seconds of each part are training and held-out data (whole frame turns when the
-frame turns on: :func:`bfr_diagnose.api.held_out_block`). Fits are bounded nonlinear
+``block`` seconds of each part are training and held-out data (whole frame turns and whole
+laps of the ball on the frame: :func:`bfr_diagnose.api.held_out_block`). Fits are bounded nonlinear
 least squares on the training blocks (``scipy.optimize.least_squares``, trust-region
 reflective) with a Jacobian that evaluates only the parts a column touches.
 
