@@ -1813,15 +1813,19 @@ def between_recordings(prob: Problem, sel: Selection) -> dict[str, Any]:
 DISAGREE_Z = 5.0
 
 
-def _tau2(y: FloatArray, s2: FloatArray) -> float:
-    """DerSimonian-Laird between-recording variance of values ``y`` with variances ``s2``."""
+def _tau2(y: FloatArray, s2: FloatArray) -> tuple[float, float]:
+    """DerSimonian-Laird between-recording variance of values ``y`` with variances ``s2``.
+
+    Returns ``(tau^2, Q)``, Cochran's Q the weighted squares about the fixed-effect mean
+    (``(0, 0)`` for fewer than two values).
+    """
     if y.size < 2:
-        return 0.0
+        return 0.0, 0.0
     w = 1.0 / s2
     yw = float(np.sum(w * y) / np.sum(w))
     q = float(np.sum(w * (y - yw) ** 2))
     s1, s2w = float(np.sum(w)), float(np.sum(w ** 2))
-    return max(0.0, (q - (y.size - 1)) / max(s1 - s2w / s1, 1e-300))
+    return max(0.0, (q - (y.size - 1)) / max(s1 - s2w / s1, 1e-300)), q
 
 
 def _disagreement(p: dict[str, Any], use: list[dict[str, Any]]) -> dict[str, Any] | None:
@@ -1838,7 +1842,7 @@ def _disagreement(p: dict[str, Any], use: list[dict[str, Any]]) -> dict[str, Any
     zs = []
     for i in range(y.size):
         o = np.arange(y.size) != i
-        t2 = _tau2(y[o], s2[o])
+        t2 = _tau2(y[o], s2[o])[0]
         w = 1.0 / (s2[o] + t2)
         m = float(np.sum(w * y[o]) / np.sum(w))
         zs.append(abs(y[i] - m) / math.sqrt(s2[i] + 1.0 / float(np.sum(w)) + t2))
@@ -1866,11 +1870,8 @@ def _random_effects(p: dict[str, Any], mine: list[dict[str, Any]]) -> dict[str, 
         return out
     y = np.array([r["value"] for r in use])
     s2 = np.array([r["std"] for r in use]) ** 2
-    w = 1.0 / s2
-    yw = float(np.sum(w * y) / np.sum(w))
-    q = float(np.sum(w * (y - yw) ** 2))
-    s1, s2w = float(np.sum(w)), float(np.sum(w ** 2))
-    tau2 = max(0.0, (q - (len(use) - 1)) / max(s1 - s2w / s1, 1e-300))
+    tau2, q = _tau2(y, s2)
+    s1 = float(np.sum(1.0 / s2))
     extra = 1.0 / float(np.sum(1.0 / (s2 + tau2))) - 1.0 / s1
     half = 1.96 * math.sqrt(sd_joint ** 2 + max(extra, 0.0))
     out.update(tau=math.sqrt(tau2), q=q, random_effects_mean=float(

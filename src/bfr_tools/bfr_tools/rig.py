@@ -780,6 +780,29 @@ def _nice(args: argparse.Namespace) -> int:
     return nice
 
 
+def _start(node: NodeSpec, log_dir: Path, env: dict[str, str], nice: int) -> None:
+    """Start one node and say so (its package, executable and pid)."""
+    node.start(log_dir, env, nice)
+    print(f"bfr rig: started {node.name} ({node.package}/{node.executable}, pid "
+          f"{node.process.pid})", flush=True)  # type: ignore[union-attr]
+
+
+def _death(node: NodeSpec) -> str:
+    """The one-line cause and log tail of a node that died."""
+    return (f"{node.name} node died ({_describe_exit(node.returncode or 0)}); its log "
+            f"({node.log_path}) ends with:\n{node.tail()}")
+
+
+def _bag_summary(bag: Path | None, mode: str, interrupted: bool,
+                 nodes: dict[str, NodeSpec]) -> dict[str, Any] | None:
+    """The run's summary from its bag (None without one), with how it ran."""
+    if bag is None or not (bag / "metadata.yaml").exists():
+        return None
+    summary = summarize_bag(bag)
+    summary.update(mode=mode, interrupted=interrupted, published=published_counts(nodes))
+    return summary
+
+
 #: What the camera and controller nodes log once they are up (their start-up lines).
 LOOP_READY = ("camera: images ", "mode WAITING (no ball yet)")
 
@@ -799,8 +822,7 @@ def _wait_loop_ready(nodes: dict[str, NodeSpec], timeout: float = 180.0) -> None
             return
         for n in logs:
             if n.returncode is not None:
-                raise RigError(f"{n.name} node died ({_describe_exit(n.returncode)}); its log "
-                               f"({n.log_path}) ends with:\n{n.tail()}")
+                raise RigError(_death(n))
         time.sleep(0.1)
     print(f"bfr rig: note: the camera and controller were not up within {timeout:g} s; "
           f"timing the run from now", flush=True)
@@ -823,9 +845,7 @@ def run_hardware(args: argparse.Namespace, log_dir: Path, bag: Path | None
     interrupted = False
     try:
         for n in order:
-            nodes[n].start(log_dir, env, nice)
-            print(f"bfr rig: started {n} ({nodes[n].package}/{nodes[n].executable}, pid "
-                  f"{nodes[n].process.pid})", flush=True)  # type: ignore[union-attr]
+            _start(nodes[n], log_dir, env, nice)
         _wait_loop_ready(nodes)
         if "recorder" in nodes:
             _wait_recorder_matched(nodes["recorder"], RECORDER_MATCH_TOPICS, timeout=60.0,
@@ -837,8 +857,7 @@ def run_hardware(args: argparse.Namespace, log_dir: Path, bag: Path | None
             dead = [n for n in order if nodes[n].returncode is not None]
             if dead:
                 n = dead[0]
-                failure = (f"{n} node died ({_describe_exit(nodes[n].returncode or 0)}); its "
-                           f"log ({nodes[n].log_path}) ends with:\n{nodes[n].tail()}")
+                failure = _death(nodes[n])
                 break
     except KeyboardInterrupt:
         interrupted = True
@@ -849,13 +868,7 @@ def run_hardware(args: argparse.Namespace, log_dir: Path, bag: Path | None
                 nodes[n].stop()
     if failure is not None:
         raise RigError(failure)
-    summary = None
-    if bag is not None and (bag / "metadata.yaml").exists():
-        summary = summarize_bag(bag)
-        summary["mode"] = "hardware"
-        summary["interrupted"] = interrupted
-        summary["published"] = published_counts(nodes)
-    return summary, log_dir, bag, None
+    return _bag_summary(bag, "hardware", interrupted, nodes), log_dir, bag, None
 
 
 def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path | None,
@@ -891,9 +904,7 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
         for n in order:
             if n == "simulator" and "recorder" in nodes:
                 _wait_recorder_matched(nodes["recorder"], RECORDER_MATCH_TOPICS)
-            nodes[n].start(log_dir, env, nice)
-            print(f"bfr rig: started {n} ({nodes[n].package}/{nodes[n].executable}, pid "
-                  f"{nodes[n].process.pid})", flush=True)  # type: ignore[union-attr]
+            _start(nodes[n], log_dir, env, nice)
         sim = nodes["simulator"]
         while True:
             time.sleep(0.2)
@@ -906,8 +917,7 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
             dead = [n for n in order if n != "simulator" and nodes[n].returncode is not None]
             if dead:
                 n = dead[0]
-                failure = (f"{n} node died ({_describe_exit(nodes[n].returncode or 0)}); its "
-                           f"log ({nodes[n].log_path}) ends with:\n{nodes[n].tail()}")
+                failure = _death(nodes[n])
                 break
             if time.monotonic() - t_start > wall_limit:
                 failure = (f"the run did not finish within {wall_limit:.0f} s of wall time; the "
@@ -923,14 +933,9 @@ def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path
     wall = _wall_stats(nodes["simulator"].log_path)
     if failure is not None:
         raise RigError(failure)
-    summary = None
-    if bag is not None and (bag / "metadata.yaml").exists():
-        summary = summarize_bag(bag)
-        summary["mode"] = args.mode
-        summary["interrupted"] = interrupted
-        summary["published"] = published_counts(nodes)
-        if wall is not None:
-            summary["wall_time"], summary["real_time_factor"] = wall
+    summary = _bag_summary(bag, args.mode, interrupted, nodes)
+    if summary is not None and wall is not None:
+        summary["wall_time"], summary["real_time_factor"] = wall
     return summary, log_dir, bag, wall
 
 
