@@ -37,7 +37,7 @@ from bfr_diagnose.effects import (
     sensor_correction,
     sensor_names_for,
 )
-from bfr_diagnose.grip import grip
+from bfr_diagnose.grip import SlipLaw, grip
 from bfr_diagnose.identify import (
     DISAGREE_Z,
     Part,
@@ -304,7 +304,8 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
     results = [_part_result(prob, i, sel, sensors0, noises[i], opts, corrected)
                for i in range(len(parts))]
     slipping = [pr.summary["grip"]["slip_test"]["mu"] for pr in results
-                if pr.summary["grip"].get("verdict") == "slips"]
+                if pr.summary["grip"].get("verdict") == "slips"
+                and pr.summary["grip"]["slip_test"]["law"] == "coulomb"]
     if slipping:  # friction-limited rolling: a term of the contact model (bfr_model.contact)
         mu = float(np.median(slipping))
         corrected = corrected.replace(**{"contact.static_friction": mu,
@@ -488,8 +489,8 @@ def _slip_against_suspects(pr: PartResult, suspects: dict[str, str]) -> list[str
     sel = m.get("prediction_causal_after", {}).get("rmse", {}).get("ball_angle")
     if not suspects or slip is None or sel is None or not slip < sel:
         return []
-    mu = pr.summary["grip"]["slip_test"]["mu"]
-    return [f"{pr.name}: with the ball's slip (mu = {mu:.2g}) the plausible effects predict "
+    law = SlipLaw.of(pr.summary["grip"]["slip_test"])
+    return [f"{pr.name}: with the ball's slip ({law.text()}) the plausible effects predict "
             f"the ball 100 ms ahead better than the selection with its suspects "
             f"({', '.join(suspects)}): {slip:.3g} against {sel:.3g} rad held out; a rolling "
             "model's suspect can be a stand-in for the slip it cannot express."]
@@ -596,11 +597,11 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
     ball_grip = grip(prep, corrected, prob.base, s1, res1.phi, res1.phi_dot, test_t)
     if ball_grip["verdict"] == "slips":
         # the model corrected_params.yaml describes (no suspects) with the slip it found
-        mu = ball_grip["slip_test"]["mu"]
+        law = SlipLaw.of(ball_grip["slip_test"])
         smoothed["after_slip"] = prediction_errors(prep, corrected, res1.phi, res1.phi_dot,
-                                                   s1, test_t, slip_mu=mu)
+                                                   s1, test_t, slip=law)
         causal["after_slip"] = causal_prediction_errors(prep, corrected, res1.phi,
-                                                        res1.phi_dot, s1, test_t, slip_mu=mu)
+                                                        res1.phi_dot, s1, test_t, slip=law)
     metrics = _metrics(part, before, after, located, smoothed, causal)
     summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],
                "duration": float(prep.t[-1] - prep.t[0]),

@@ -33,9 +33,10 @@ friction coefficient on a plate edge.
    ``(phi, phi_dot)`` is fitted to the ball's world angle over the horizon before it, the
    window's ``horizon`` is predicted and scored (the causal measure of
    :func:`bfr_diagnose.locate.causal_prediction_errors`, with the frame's measured motion
-   instead of its simulated one, so the figure is the ball's alone). mu is chosen on the
-   training windows over :data:`MU_GRID` (values the demand never reaches act as rolling
-   and are skipped) and rolling; the held-out windows score rolling against the chosen mu,
+   instead of its simulated one, so the figure is the ball's alone). The law is chosen on
+   the training windows among rolling, Coulomb friction over :data:`MU_GRID` (values the
+   demand never reaches act as rolling and are skipped) and linear creep (5) over
+   :data:`TAU_GRID`; the held-out windows score rolling against the chosen law,
    and a one-sided sign-flip randomisation test of the windows' paired differences (each
    window's squared error rolling minus slipping; under no difference each sign is as
    likely, :data:`FLIPS` random flips, a fixed seed) says whether slipping predicts the
@@ -58,12 +59,30 @@ friction coefficient on a plate edge.
    feels the slip: the ball's spin no longer loads it. Without wobble (``frame.wobble``).
    Checked against the force-based contact model (another structure) and by the energy of
    a frictionless ball (tests/test_diagnose_grip.py).
+5. **Linear creep** (:func:`creep_rollout`, :func:`_creep_ball_rollout`). Coulomb's law lets
+   the spin catch up with the rolling the moment friction can: sliding ends within a few
+   milliseconds once the demand falls. A contact that creeps (Kalker's linear theory of
+   rolling contact, Johnson 1985 ch. 8: a tangential force proportional to the slip while
+   it is small) lets the slip persist: ``tau_f = -(J_b / tau_s) (omega_b - omega_roll)``,
+   ``J_b omega_b' = tau_f``, and on the translation ``(lam / R) tau_f`` as in (4), so that
+   without the frame the relative spin relaxes as ``exp(-t (1 + J_b lam^2 / (R^2 M22_t)) /
+   tau_s)`` (``M22_t`` the translation's inertia). ``tau_s -> 0`` is rolling, ``tau_s ->
+   inf`` the spinless ball of mu = 0. The spin is a fifth state at every instant: each
+   window's start fits the relative spin beside ``(phi, phi_dot)`` (from 0), the coupled
+   predictions fit it as a fifth start state (:func:`bfr_diagnose.locate.
+   causal_prediction_errors`); a smoothed start has none and starts rolling. Classical RK4
+   (coupled) and the midpoint rule (ball alone) in steps of at most :data:`MAX_STEP`, far
+   below the relaxation time of the smallest ``tau_s`` tried. Neither the rigid model nor
+   the contact model (Coulomb at the edges, a stiff stick spring) has this law: a ball that
+   creeps is reported, its coefficient is not written into the parameters. The friction's
+   power ``tau_f (omega_b - omega_roll) = -(J_b / tau_s) (omega_b - omega_roll)^2`` is
+   never positive.
 
-The grid is walked down from rolling and stops once the training cost has risen after a
-fall (the cost of mu is unimodal in every case seen).
+Each grid is walked away from rolling (mu down, tau_s up) and stops once the training cost
+has risen after a fall, or twice without one (the costs are unimodal in every case seen).
 
-Slip is not a term of the rigid model the simulator runs; it is one of the contact model
-(``contact.static_friction`` and ``contact.dynamic_friction``), which the report names. The
+Slip is not a term of the rigid model the simulator runs; Coulomb slip is one of the contact
+model (``contact.static_friction`` and ``contact.dynamic_friction``), which the report names. The
 diagnosis's predictions carry it (4): where the ball slips, the plausible effects (those
 ``corrected_params.yaml`` holds) with mu predict the ball beside the selection's model. The
 test needs a ball on a turning frame; a held frame or a frame alone is not tested.
@@ -93,13 +112,17 @@ from scipy.optimize import least_squares
 
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 
-__all__ = ["ALPHA", "FLIPS", "MAX_STEP", "MIN_GAIN", "MU_GRID", "coupled_rollout", "grip",
-           "slip_parameters"]
+__all__ = ["ALPHA", "FLIPS", "MAX_STEP", "MIN_GAIN", "MU_GRID", "TAU_GRID", "SlipLaw",
+           "coupled_rollout", "creep_rollout", "grip", "slip_parameters"]
 
 FloatArray = NDArray[np.float64]
 
 #: Friction coefficients of the ball on a plate edge tried by the slip test [-] (factor 1.5).
 MU_GRID = (0.05, 0.075, 0.11, 0.17, 0.25, 0.38, 0.57)
+
+#: Relaxation times of the spin under linear creep tried by the slip test [s] (factor 1.5,
+#: from a ball that nearly rolls to one whose spin follows its rolling over a lap's part).
+TAU_GRID = (0.02, 0.03, 0.045, 0.067, 0.1, 0.15, 0.22, 0.33)
 
 #: Held-out improvement of the ball's prediction that slipping must reach to be reported.
 MIN_GAIN = 1.1
@@ -113,6 +136,9 @@ FLIPS = 20000
 #: Longest step of the ball's integration [s] (a grid step longer than this is cut into equal
 #: sub-steps). Halving it moves the slip test's figures on the NTNU logs by < 1 %.
 MAX_STEP = 0.002
+
+#: Scales of a window's start in its fit: phi [rad], phi_dot [rad/s], relative spin [rad/s].
+_START_SCALE = np.array([1e-3, 0.1, 1.0])
 
 #: Spacing of the training windows [s] (the held-out ones are the predictions' spacing).
 _TRAIN_EVERY = 0.4
@@ -222,6 +248,55 @@ def _rollout(ph, phd, j, n, th, thd, thdd, mu, dt, ns, Pf, Pt, g0, g1, g2, g3, g
 
 
 @njit
+def _creep_ball_rollout(ph, phd, rel0, j, n, th, thd, thdd, inv_tau, dt, ns, Pf, Pt, g0, g1,  # noqa: ANN001, ANN202
+                        g2, g3, g4, g5, g6, g7, jb, rr):  # noqa: ANN001
+    """The contact angle at grid samples ``j .. j + n`` under linear creep (module docstring, 5).
+
+    The ball alone under the measured frame motion, its spin a state: ``tau_f = -(J_b /
+    tau_s) (omega_b - omega_roll)`` (``inv_tau = 1 / tau_s``) on the spin, ``(lam / R) tau_f``
+    on the translation (the rigid model's row with ``J_b = 0``), as the sliding branch of
+    :func:`_rollout` with this friction in place of Coulomb's. ``rel0``: the relative spin
+    ``omega_b - omega_roll`` at j [rad/s]. The midpoint rule, the frame at the half step.
+    NaN after a non-finite step.
+    """
+    out = np.full(n + 1, np.nan)
+    out[0] = ph
+    w = thd[j] - curve_terms(ph, Pf, g0, g1, g2, g3, g4, g5, g6, g7)[8] * phd / rr + rel0
+    h = dt / ns
+    for k in range(j, j + n):
+        for s in range(ns):
+            f = s / ns
+            t_ = th[k] + f * (th[k + 1] - th[k])
+            td = thd[k] + f * (thd[k + 1] - thd[k])
+            tdd = thdd[k] + f * (thdd[k + 1] - thdd[k])
+            lam = curve_terms(ph, Pf, g0, g1, g2, g3, g4, g5, g6, g7)[8]
+            tau = -jb * inv_tau * (w - (td - lam * phd / rr))
+            m22 = mass_terms(ph, Pt, g0, g1, g2, g3, g4, g5, g6, g7)[2]
+            a_t = (_ball_acc(t_, ph, td, phd, tdd, Pt, g0, g1, g2, g3, g4, g5, g6, g7)[0]
+                   + lam / rr * tau / m22)
+            fm = f + 0.5 / ns
+            t_m = th[k] + fm * (th[k + 1] - th[k])
+            td_m = thd[k] + fm * (thd[k + 1] - thd[k])
+            tdd_m = thdd[k] + fm * (thdd[k + 1] - thdd[k])
+            ph_m = ph + 0.5 * h * phd
+            phd_m = phd + 0.5 * h * a_t
+            w_m = w + 0.5 * h * tau / jb
+            lam_m = curve_terms(ph_m, Pf, g0, g1, g2, g3, g4, g5, g6, g7)[8]
+            tau_m = -jb * inv_tau * (w_m - (td_m - lam_m * phd_m / rr))
+            m22_m = mass_terms(ph_m, Pt, g0, g1, g2, g3, g4, g5, g6, g7)[2]
+            a_m = (_ball_acc(t_m, ph_m, td_m, phd_m, tdd_m, Pt, g0, g1, g2, g3, g4, g5, g6,
+                             g7)[0]
+                   + lam_m / rr * tau_m / m22_m)
+            w += h * tau_m / jb
+            ph += h * phd_m
+            phd += h * a_m
+        if not (np.isfinite(ph) and abs(phd) < 1e3):
+            return out
+        out[k - j + 1] = ph
+    return out
+
+
+@njit
 def _sliding_acc(th, ph, thd, phd, u, sgn, mu, Pt, g0, g1, g2, g3, g4, g5, g6, g7, rb, rr):  # noqa: ANN001, ANN202
     """``(theta_ddot, phi_ddot, tau_f)`` of the frame and a sliding ball (module docstring, 4).
 
@@ -308,6 +383,50 @@ def _coupled_rollout(x0, u, dt, ns, mu, Pf, Pt, g0, g1, g2, g3, g4, g5, g6, g7, 
     return xs
 
 
+@njit
+def _creep_rhs(x, u, inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4, g5, g6, g7):  # noqa: ANN001, ANN202
+    """``d/dt [theta, phi, theta_dot, phi_dot, omega_b]`` under linear creep (docstring, 5)."""
+    lam = curve_terms(x[1], Pt, g0, g1, g2, g3, g4, g5, g6, g7)[8]
+    tau = -jb * inv_tau * (x[4] - (x[2] - lam * x[3] / rr))
+    a = forced_terms(x[0], x[1], x[2], x[3], u, -tau, lam * tau / rr, Pt, g0, g1, g2, g3, g4,
+                     g5, g6, g7)
+    out = np.empty(5)
+    out[0] = x[2]
+    out[1] = x[3]
+    out[2] = a[0]
+    out[3] = a[1]
+    out[4] = tau / jb
+    return out
+
+
+@njit
+def _creep_coupled_rollout(x0, u, dt, ns, inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4, g5, g6, g7):  # noqa: ANN001, ANN202
+    """States ``[theta, phi, theta_dot, phi_dot, omega_b]`` (n + 1, 5) under creep.
+
+    ``x0`` the same five at the start; ``ns`` classical RK4 steps per grid step of dt,
+    ``u[k]`` held over it (module docstring, 5). NaN from a non-finite step on.
+    """
+    n = u.shape[0]
+    xs = np.full((n + 1, 5), np.nan)
+    x = x0.copy()
+    xs[0, :] = x
+    h = dt / ns
+    for k in range(n):
+        for _ in range(ns):
+            k1 = _creep_rhs(x, u[k], inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4, g5, g6, g7)
+            k2 = _creep_rhs(x + 0.5 * h * k1, u[k], inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4,
+                            g5, g6, g7)
+            k3 = _creep_rhs(x + 0.5 * h * k2, u[k], inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4,
+                            g5, g6, g7)
+            k4 = _creep_rhs(x + h * k3, u[k], inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4, g5, g6,
+                            g7)
+            x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+        if not (np.isfinite(x[1]) and abs(x[3]) < 1e3):
+            return xs
+        xs[k + 1, :] = x
+    return xs
+
+
 def slip_parameters(model: RigidModel) -> tuple[FloatArray, FloatArray, float, float, float]:
     """``(Pf, Pt, J_b, R_b, R)`` of a model for :func:`coupled_rollout`.
 
@@ -350,6 +469,83 @@ def coupled_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
                             *model.geom_args, jb, rb, rr)
 
 
+def creep_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
+                  tau_s: float) -> FloatArray:
+    """Frame and ball open loop under a torque record, the ball's spin relaxing by creep.
+
+    Parameters
+    ----------
+    model : RigidModel
+        The rigid model (its ball's spin inertia and rolling radius give the creep's terms).
+    x0 : ndarray
+        Start ``[theta, phi, theta_dot, phi_dot]`` [rad, rad/s], and optionally the relative
+        spin ``omega_b - omega_roll`` [rad/s] (0, rolling, when absent).
+    u : ndarray
+        Torque command of each grid step [N m] (held over the step).
+    dt : float
+        Grid step [s]; integrated in RK4 steps of at most :data:`MAX_STEP`.
+    tau_s : float
+        Relaxation time of the spin [s] (module docstring, 5).
+
+    Returns
+    -------
+    ndarray
+        States (len(u) + 1, 4); NaN from a non-finite step on.
+    """
+    pf, pt, jb, _, rr = slip_parameters(model)
+    ns = max(int(np.ceil(dt / MAX_STEP - 1e-9)), 1)
+    lam = float(curve_terms(float(x0[1]), pf, *model.geom_args)[8])
+    rel0 = float(x0[4]) if len(x0) > 4 else 0.0
+    x = np.array([x0[0], x0[1], x0[2], x0[3], x0[2] - lam * x0[3] / rr + rel0], float)
+    return _creep_coupled_rollout(x, np.ascontiguousarray(u, float), dt, ns, 1.0 / tau_s, jb,
+                                  rr, pt, *model.geom_args)[:, :4]
+
+
+@dataclass(frozen=True, kw_only=True)
+class SlipLaw:
+    """How a slipping ball's spin follows its rolling: Coulomb friction or linear creep.
+
+    ``kind`` ``"coulomb"``: ``value`` is mu [-] (module docstring, 2 and 4); ``"creep"``:
+    ``value`` is the spin's relaxation time tau_s [s] (5).
+    """
+
+    kind: str
+    value: float
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("coulomb", "creep"):
+            raise ValueError(f"slip law {self.kind!r}: 'coulomb' or 'creep'")
+        if not (np.isfinite(self.value) and (self.value > 0.0 or (
+                self.kind == "coulomb" and self.value == 0.0))):
+            raise ValueError(f"slip law {self.kind}: value {self.value} must be > 0 "
+                             "(mu >= 0)")
+
+    @classmethod
+    def of(cls, slip_test: dict[str, Any] | None) -> SlipLaw | None:
+        """The law a slip test chose (None: rolling, or no test)."""
+        if not slip_test or slip_test.get("law") is None:
+            return None
+        key = "mu" if slip_test["law"] == "coulomb" else "tau_s"
+        return cls(kind=slip_test["law"], value=float(slip_test[key]))
+
+    @property
+    def states(self) -> int:
+        """Start states a rollout takes: the relative spin is a fifth one under creep."""
+        return 5 if self.kind == "creep" else 4
+
+    def text(self) -> str:
+        """``mu = 0.17`` or ``creep, tau_s = 0.1 s``."""
+        return (f"mu = {self.value:.2g}" if self.kind == "coulomb"
+                else f"creep, tau_s = {self.value:.2g} s")
+
+    def rollout(self, model: RigidModel, x0: FloatArray, u: FloatArray, dt: float
+                ) -> FloatArray:
+        """Frame and ball open loop under this law (coupled_rollout, creep_rollout)."""
+        if self.kind == "coulomb":
+            return coupled_rollout(model, x0[:4], u, dt, self.value)
+        return creep_rollout(model, x0, u, dt, self.value)
+
+
 @dataclass(frozen=True, kw_only=True, eq=False)
 class _Ball:
     """One model's ball under one recording's measured frame motion."""
@@ -380,30 +576,43 @@ class _Ball:
                    thdd=np.ascontiguousarray(prep.theta_ddot),
                    dt=float(prep.t[1] - prep.t[0]))
 
-    def roll(self, ph: float, phd: float, j: int, n: int, mu: float) -> FloatArray:
-        """Contact angle at ``j .. j + n`` from ``(ph, phd)`` at j (``mu < 0``: rolling)."""
+    def roll(self, z: FloatArray, j: int, n: int, law: SlipLaw | None) -> FloatArray:
+        """Contact angle at ``j .. j + n`` from ``z`` at j (``law`` None: rolling).
+
+        ``z = (phi, phi_dot[, omega_b - omega_roll])``: the relative spin only under creep.
+        """
         ns = max(int(np.ceil(self.dt / MAX_STEP - 1e-9)), 1)
-        return _rollout(ph, phd, j, n, self.th, self.thd, self.thdd, mu, self.dt, ns,
-                        self.pf, self.pt, *self.model.geom_args, self.jb, self.rb, self.rr)
+        if law is not None and law.kind == "creep":
+            return _creep_ball_rollout(z[0], z[1], z[2] if len(z) > 2 else 0.0, j, n, self.th,
+                                       self.thd, self.thdd, 1.0 / law.value, self.dt, ns,
+                                       self.pf, self.pt, *self.model.geom_args, self.jb,
+                                       self.rr)
+        return _rollout(z[0], z[1], j, n, self.th, self.thd, self.thdd,
+                        -1.0 if law is None else law.value, self.dt, ns, self.pf, self.pt,
+                        *self.model.geom_args, self.jb, self.rb, self.rr)
 
     def in_frame(self, phi: FloatArray) -> FloatArray:
         """The ball's polar angle in the frame [rad] at contact angles phi."""
         return self.model.curve.ball_angle(phi)
 
     def window_error(self, meas: FloatArray, guess: FloatArray, j: int, nw: int, nh: int,
-                     mu: float) -> float | None:
+                     law: SlipLaw | None) -> float | None:
         """Squared ball-angle error summed over the horizon after a start fitted before it.
 
         ``meas``: the measured in-frame ball angle on ``[j, j + nw + nh]``; the start
-        ``(phi, phi_dot)`` at j is fitted to its first ``nw + 1`` samples. None when the fit
-        or the rollout fails.
+        ``(phi, phi_dot)`` at j (and under creep the relative spin, from 0) is fitted to its
+        first ``nw + 1`` samples. None when the fit or the rollout fails.
         """
+        creep = law is not None and law.kind == "creep"
+        z0 = np.r_[guess, 0.0] if creep else np.asarray(guess, float)
+
         def fun(z: FloatArray) -> FloatArray:
-            r = self.in_frame(self.roll(z[0], z[1], j, nw, mu)) - meas[:nw + 1]
+            r = self.in_frame(self.roll(z, j, nw, law)) - meas[:nw + 1]
             return np.where(np.isfinite(r), r, 1.0)
 
-        sol = least_squares(fun, guess, x_scale=[1e-3, 0.1], method="lm", max_nfev=60)
-        phi = self.roll(sol.x[0], sol.x[1], j, nw + nh, mu)
+        sol = least_squares(fun, z0, x_scale=_START_SCALE[:z0.size], method="lm",
+                            max_nfev=30 * z0.size)
+        phi = self.roll(sol.x, j, nw + nh, law)
         e = self.in_frame(phi[nw + 1:]) - meas[nw + 1:]
         return float(np.sum(e ** 2)) if np.all(np.isfinite(e)) else None
 
@@ -465,13 +674,13 @@ def _starts(prep: Prepared, mask: NDArray[np.bool_], phi: FloatArray, phi_dot: F
 
 
 def _scores(ball: _Ball, starts: list[int], meas: FloatArray, phi: FloatArray,
-            phi_dot: FloatArray, nw: int, nh: int, mu: float) -> FloatArray:
+            phi_dot: FloatArray, nw: int, nh: int, law: SlipLaw | None) -> FloatArray:
     """Each window's squared error over the horizon (NaN where the fit failed)."""
     out = np.full(len(starts), np.nan)
     for q, i0 in enumerate(starts):
         j = i0 - nw
         e = ball.window_error(meas[j:i0 + nh + 1], np.array([phi[j], phi_dot[j]]), j, nw, nh,
-                              mu)
+                              law)
         if e is not None:
             out[q] = e
     return out
@@ -570,22 +779,32 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
         out.update(verdict="rolls", meaning=f"rolling needs mu <= {top:.3g} everywhere: "
                    f"below every coefficient tried ({MU_GRID[0]})")
         return out
-    # descending from rolling: stop once the training cost has risen after a fall
-    costs = {-1.0: _scores(ball, train, meas, phi, phi_dot, nw, nh, -1.0)}
-    last, fell = float(np.nansum(costs[-1.0])), False
-    for m in reversed(grid):
-        costs[m] = _scores(ball, train, meas, phi, phi_dot, nw, nh, m)
-        c = float(np.nansum(costs[m]))
-        if fell and c > last:
-            break
-        fell, last = fell or c < last, c
+    costs: dict[str, FloatArray] = {"rolling": _scores(ball, train, meas, phi, phi_dot, nw, nh,
+                                                        None)}
+    laws: dict[str, SlipLaw | None] = {"rolling": None}
+
+    def walk(steps: list[SlipLaw]) -> None:
+        """Away from rolling along one law's grid, until the cost rose (module docstring)."""
+        last, fell, rose = float(np.nansum(costs["rolling"])), False, 0
+        for law in steps:
+            key = _key(law)
+            costs[key], laws[key] = _scores(ball, train, meas, phi, phi_dot, nw, nh, law), law
+            c = float(np.nansum(costs[key]))
+            rose += c > last
+            if (fell and c > last) or rose >= 2:
+                break
+            fell, last = fell or c < last, c
+
+    walk([SlipLaw(kind="coulomb", value=m) for m in reversed(grid)])
+    walk([SlipLaw(kind="creep", value=t) for t in TAU_GRID])
     both = np.all([np.isfinite(c) for c in costs.values()], axis=0)
-    train_cost = {m: float(np.sum(c[both])) for m, c in costs.items()}
-    mu = min(train_cost, key=train_cost.get)
-    rejected = [m for m, c in train_cost.items() if m > 0 and c > train_cost[-1.0]]
-    roll_h = _scores(ball, held, meas, phi, phi_dot, nw, nh, -1.0)
-    nom_h = _scores(_Ball.of(nominal, prep, sensor), held, meas, phi, phi_dot, nw, nh, -1.0)
-    slip_h = roll_h if mu < 0 else _scores(ball, held, meas, phi, phi_dot, nw, nh, mu)
+    train_cost = {k: float(np.sum(c[both])) for k, c in costs.items()}
+    law = laws[min(train_cost, key=train_cost.get)]
+    rejected = [v.value for k, v in laws.items()
+                if v is not None and v.kind == "coulomb" and train_cost[k] > train_cost["rolling"]]
+    roll_h = _scores(ball, held, meas, phi, phi_dot, nw, nh, None)
+    nom_h = _scores(_Ball.of(nominal, prep, sensor), held, meas, phi, phi_dot, nw, nh, None)
+    slip_h = roll_h if law is None else _scores(ball, held, meas, phi, phi_dot, nw, nh, law)
     ok = np.isfinite(roll_h) & np.isfinite(slip_h) & np.isfinite(nom_h)
     n = int(ok.sum())
 
@@ -597,9 +816,12 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
     p = _flip_test(roll_h[ok] - slip_h[ok])
     gain = rms(roll_h) / max(rms(slip_h), 1e-300)
     out["slip_test"] = {
-        "mu_grid": [m for m in grid if m in costs],
-        "train_cost": {("rolling" if m < 0 else str(m)): c for m, c in train_cost.items()},
-        "mu": None if mu < 0 else mu,
+        "mu_grid": [v.value for v in laws.values() if v is not None and v.kind == "coulomb"],
+        "tau_grid": [v.value for v in laws.values() if v is not None and v.kind == "creep"],
+        "train_cost": train_cost,
+        "law": None if law is None else law.kind,
+        "mu": law.value if law is not None and law.kind == "coulomb" else None,
+        "tau_s": law.value if law is not None and law.kind == "creep" else None,
         "mu_rejected_up_to": max(rejected) if rejected else None,
         "windows_train": int(both.sum()), "windows_heldout": n,
         "ball_rmse_rolling": rms(roll_h), "ball_rmse_slipping": rms(slip_h),
@@ -607,19 +829,33 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
         "improvement_vs_nominal": rms(nom_h) / max(rms(slip_h), 1e-300),
         "windows_better": better, "windows_worse": worse, "p_value": p,
         "horizon": nh * dt, "unit": "rad (the ball's angle in the frame)"}
-    if mu > 0 and gain >= MIN_GAIN and p < ALPHA:
+    held_out = (f"predicts the ball {gain:.2f}x better on held-out windows ({better} of "
+                f"{better + worse} better, randomisation test p = {p:.1g})")
+    if law is not None and gain >= MIN_GAIN and p < ALPHA and law.kind == "coulomb":
         out.update(verdict="slips", meaning=(
-            f"the ball slips on the plate edges where rolling needs more than mu = {mu:.2g} "
-            f"(up to {top:.2f} at t = {demand['t_max']:.2f} s): friction-limited rolling "
-            f"predicts the ball {gain:.2f}x better on held-out windows ({better} of "
-            f"{better + worse} better, randomisation test p = {p:.1g}); the rigid model "
-            f"cannot slip, the contact model can (contact.static_friction = "
-            f"contact.dynamic_friction = {mu:.2g})"))
+            f"the ball slips on the plate edges where rolling needs more than mu = "
+            f"{law.value:.2g} (up to {top:.2f} at t = {demand['t_max']:.2f} s): "
+            f"friction-limited rolling {held_out}; the rigid model cannot slip, the contact "
+            f"model can (contact.static_friction = contact.dynamic_friction = "
+            f"{law.value:.2g})"))
+    elif law is not None and gain >= MIN_GAIN and p < ALPHA:
+        out.update(verdict="slips", meaning=(
+            f"the ball slips on the plate edges, its spin lagging its rolling and catching "
+            f"up over about {law.value:.2g} s: "
+            f"linear creep at the plate edges (J_b omega_b' = -(J_b / tau_s) (omega_b - "
+            f"omega_roll), tau_s = {law.value:.2g} s) {held_out}, better than any Coulomb "
+            f"coefficient on the training windows (rolling needs up to {top:.2f}); neither "
+            f"the rigid model nor the contact model (Coulomb at the edges) has this law"))
     else:
-        tried = "rolling" if mu < 0 else f"mu = {mu:.2g}"
+        tried = "rolling" if law is None else law.text()
         bound = (f"; the data reject mu <= {max(rejected):.2g}" if rejected else "")
         out.update(verdict="rolls", meaning=(
             f"no slip seen: the training windows chose {tried}; held out, slipping "
             f"{gain:.2f}x ({better} of {better + worse} windows better, p = {p:.1g}); "
             f"rolling needs mu up to {top:.2f}{bound}"))
     return out
+
+
+def _key(law: SlipLaw) -> str:
+    """A law's key in the slip test's training costs: ``0.17`` (mu) or ``tau_s 0.1``."""
+    return str(law.value) if law.kind == "coulomb" else f"tau_s {law.value}"

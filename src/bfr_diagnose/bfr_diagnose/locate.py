@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.stats import chi2
 
-from bfr_diagnose.grip import coupled_rollout
+from bfr_diagnose.grip import SlipLaw
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 from bfr_diagnose.residual import ROW_NAMES, Residual
 
@@ -333,8 +333,8 @@ class _Predictor:
         Torque acting at each grid time [N m].
     usable : ndarray of bool
         Grid samples usable (``ball_ok`` with a ball, else ``frame_ok``).
-    slip_mu : float
-        Friction coefficient of the ball on a plate edge [-] (< 0: it rolls without slip).
+    slip : SlipLaw or None
+        How the ball slips (:class:`bfr_diagnose.grip.SlipLaw`); None: it rolls.
     """
 
     prep: Prepared
@@ -347,18 +347,19 @@ class _Predictor:
     rho: FloatArray
     u: FloatArray
     usable: NDArray[np.bool_]
-    slip_mu: float = -1.0
+    slip: SlipLaw | None = None
 
     def rollout(self, x0: FloatArray, i: int, n: int) -> FloatArray:
         """States (n + 1, 4) open loop from ``x0`` at grid sample i.
 
         ``x0 = [theta, phi, theta_dot, phi_dot]``; the recorded torque ``u[i], ...,
-        u[i + n - 1]`` acts. With ``slip_mu`` >= 0 the ball may slip (friction-limited
-        rolling, :func:`bfr_diagnose.grip.coupled_rollout`), rolling at x0.
+        u[i + n - 1]`` acts. With ``slip`` the ball may slip (:meth:`SlipLaw.rollout
+        <bfr_diagnose.grip.SlipLaw.rollout>`): rolling at x0, or under creep with the
+        relative spin ``x0[4]`` when given.
         """
         u = np.ascontiguousarray(self.u[i:i + n])
-        if self.prep.has_ball and self.slip_mu >= 0.0:
-            return coupled_rollout(self.model, x0, u, self.dt, self.slip_mu)
+        if self.prep.has_ball and self.slip is not None:
+            return self.slip.rollout(self.model, x0, u, self.dt)
         if self.prep.has_ball:
             x = np.array([x0[0], x0[1], x0[2], x0[3], 0.0, 0.0])
             return _rigid_rollout(x, u, self.dt, *self.model.kernel_args)
@@ -382,7 +383,7 @@ class _Predictor:
 
 
 def _predictor(prep: Prepared, params: RigParams, sensor: SensorCorrection | None,
-               horizon: float, every: float, slip_mu: float = -1.0) -> _Predictor:
+               horizon: float, every: float, slip: SlipLaw | None = None) -> _Predictor:
     """The :class:`_Predictor` of a model on a recording under a sensor correction."""
     dt = float(prep.t[1] - prep.t[0])
     sensor = sensor or SensorCorrection()
@@ -393,7 +394,7 @@ def _predictor(prep: Prepared, params: RigParams, sensor: SensorCorrection | Non
                       nh=max(round(horizon / dt), 1), step=max(round(every / dt), 1),
                       theta=prep.theta + sensor.theta_zero, psi_w=psi_w, rho=rho,
                       u=prep.u_for(sensor),
-                      usable=prep.usable, slip_mu=slip_mu)
+                      usable=prep.usable, slip=slip)
 
 
 class _Scores:
@@ -444,7 +445,7 @@ class _Scores:
 def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_dot: FloatArray,
                       sensor: SensorCorrection | None, test_mask_t: NDArray[np.bool_],
                       horizon: float = 0.1, every: float = 0.2,
-                      keep_traces: int = 0, slip_mu: float = -1.0) -> dict[str, Any]:
+                      keep_traces: int = 0, slip: SlipLaw | None = None) -> dict[str, Any]:
     """Short-horizon open-loop prediction errors on the held-out samples, smoothed start.
 
     At each window start i0 (every ``every`` seconds where ``[i0, i0 + horizon]`` is usable
@@ -472,9 +473,9 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
         Prediction horizon and spacing of the start points [s].
     keep_traces : int
         Return this many predicted traces (for the overlay plot).
-    slip_mu : float
-        Friction coefficient of the ball on a plate edge [-]: >= 0, the ball may slip
-        (:func:`bfr_diagnose.grip.coupled_rollout`); < 0 (default), it rolls.
+    slip : SlipLaw or None
+        How the ball may slip (:class:`bfr_diagnose.grip.SlipLaw`: Coulomb friction or
+        creep, rolling at the start); None (default): it rolls.
 
     Returns
     -------
@@ -483,7 +484,7 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
         ``n_windows``, ``horizon`` [s], ``start`` (``"smoothed"``) and optionally
         ``traces``.
     """
-    pred = _predictor(prep, params, sensor, horizon, every, slip_mu)
+    pred = _predictor(prep, params, sensor, horizon, every, slip)
     scores = _Scores(pred, keep_traces)
     for i0 in pred.starts(test_mask_t):
         if prep.has_ball and not (np.isfinite(phi[i0]) and np.isfinite(phi_dot[i0])):
@@ -497,9 +498,10 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
     return scores.result(horizon, start="smoothed")
 
 
-#: Scale of each state in the start-state fit: theta, phi [rad], theta_dot, phi_dot [rad/s]
+#: Scale of each state in the start-state fit: theta, phi [rad], theta_dot, phi_dot [rad/s] and
+#: (under creep) the ball's relative spin [rad/s]
 #: (``x_scale`` of the solver; the finite-difference steps are 1e-4 of it).
-_STATE_SCALE = np.array([1e-3, 1e-3, 0.1, 0.1])
+_STATE_SCALE = np.array([1e-3, 1e-3, 0.1, 0.1, 1.0])
 
 #: Noise below which a measured angle's noise is taken as this [rad] (an exact encoder, a
 #: noise-free simulation): the weights stay finite.
@@ -533,8 +535,9 @@ class _StartFit:
 def _fit_start(pred: _Predictor, guess: FloatArray, j: int, nw: int) -> _StartFit | None:
     """The start state at grid sample j that best explains the measurements on ``[j, j + nw]``.
 
-    Unknowns: all four states when the ball rolls on a turning frame; ``(theta, theta_dot)``
-    without a ball; ``(phi, phi_dot)`` on a held frame (theta and theta_dot stay measured).
+    Unknowns: all four states when the ball rolls on a turning frame, and the ball's relative
+    spin where the guess carries one (a fifth state: creep); ``(theta, theta_dot)`` without a
+    ball; ``(phi, phi_dot)`` on a held frame (theta and theta_dot stay measured).
     Residuals, each over its noise: the frame angle ``(theta_m(x0; t_k) - theta(t_k)) /
     sigma_theta`` (not on a held frame) and the ball's world angle ``(psi_w,m(x0; t_k) -
     psi_w(t_k)) / (sigma_cam / rho)`` with a ball, ``sigma_cam`` the camera's noise per axis
@@ -551,6 +554,8 @@ def _fit_start(pred: _Predictor, guess: FloatArray, j: int, nw: int) -> _StartFi
     """
     prep = pred.prep
     free = ([1, 3] if prep.frame_held else [0, 1, 2, 3]) if prep.has_ball else [0, 2]
+    if guess.size > 4:  # the relative spin of a ball under creep
+        free = [*free, 4]
     seg = slice(j, j + nw + 1)
     th_m = pred.theta[seg]
     sig_th = _noise_rad(prep.noise.get("theta"))
@@ -608,7 +613,8 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
                              phi_dot: FloatArray, sensor: SensorCorrection | None,
                              test_mask_t: NDArray[np.bool_], horizon: float = 0.1,
                              every: float = 0.2, fit_window: float | None = None,
-                             keep_traces: int = 0, slip_mu: float = -1.0) -> dict[str, Any]:
+                             keep_traces: int = 0, slip: SlipLaw | None = None
+                             ) -> dict[str, Any]:
     """Short-horizon prediction errors on the held-out samples, the start fitted before.
 
     Causal and model-based: Ljung's k-step prediction with the initial state estimated from
@@ -626,9 +632,10 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
 
     Parameters
     ----------
-    prep, params, phi, phi_dot, sensor, test_mask_t, horizon, every, keep_traces, slip_mu
-        As :func:`prediction_errors` (phi and phi_dot only give the fit's starting guess;
-        with slip_mu the ball rolls at the fit window's start).
+    prep, params, phi, phi_dot, sensor, test_mask_t, horizon, every, keep_traces, slip
+        As :func:`prediction_errors` (phi and phi_dot only give the fit's starting guess).
+        Under Coulomb slip the ball rolls at the fit window's start; under creep the
+        relative spin there is a fifth unknown of the fit (from 0): a state of that model.
     fit_window : float, optional
         Length W of the fit window before each start [s] (default: the horizon).
 
@@ -640,7 +647,7 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
         (the fits' residual RMS over the noise, pooled); each trace also holds the fitted
         start (``fit_t`` [s], ``fit_state``).
     """
-    pred = _predictor(prep, params, sensor, horizon, every, slip_mu)
+    pred = _predictor(prep, params, sensor, horizon, every, slip)
     nw = max(round((horizon if fit_window is None else fit_window) / pred.dt), 1)
     scores = _Scores(pred, keep_traces)
     skipped = 0
@@ -648,7 +655,9 @@ def causal_prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray,
     for i0 in pred.starts(test_mask_t, lead=nw):
         j = i0 - nw
         guess = np.array([pred.theta[j], phi[j] if prep.has_ball else 0.0,
-                          prep.theta_dot[j], phi_dot[j] if prep.has_ball else 0.0])
+                          prep.theta_dot[j], phi_dot[j] if prep.has_ball else 0.0, 0.0])
+        if not (prep.has_ball and slip is not None and slip.states == 5):
+            guess = guess[:4]
         if not np.all(np.isfinite(guess)):
             continue
         fit = _fit_start(pred, guess, j, nw)

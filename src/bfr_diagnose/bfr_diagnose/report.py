@@ -25,6 +25,7 @@ from bfr_model.params import params_to_ros_yaml
 
 from bfr_diagnose.api import Diagnosis, PartResult
 from bfr_diagnose.effects import DESTINATION, EFFECTS, display_values
+from bfr_diagnose.grip import SlipLaw
 from bfr_diagnose.locate import phi_dot_misfit_by_place
 from bfr_diagnose.synth import SynthConfig, stabilised_recording
 
@@ -91,11 +92,15 @@ def corrected_yaml(d: Diagnosis) -> str:
         lines.append(f"NOT applied (suspect, physically implausible): {name}: {why}.")
     for rec in s["recordings"]:
         g = rec.get("grip", {})
-        if g.get("verdict") == "slips":
+        if g.get("verdict") == "slips" and g["slip_test"]["law"] == "coulomb":
             lines.append(f"{Path(rec['name']).name}: the ball slips (mu = "
                          f"{g['slip_test']['mu']:.3g}); contact.static_friction and "
                          "contact.dynamic_friction carry it for the contact model (the rigid "
                          "model cannot slip).")
+        elif g.get("verdict") == "slips":
+            lines.append(f"{Path(rec['name']).name}: the ball slips "
+                         f"({SlipLaw.of(g['slip_test']).text()}); no model the simulator "
+                         "runs has this law: not written into the parameters.")
     for c in s["confounded"]:
         if c.get("kind") in ("pair", "sensor"):
             lines.append(f"Confounded: {' / '.join(c['effects'])} (only a combination is "
@@ -170,7 +175,8 @@ def format_text(s: dict[str, Any]) -> str:
                            for k in pb if _num(pb[k]) != "n/a"))
             if f"{key}_after_slip" in m:
                 ps = m[f"{key}_after_slip"]["rmse"]["ball_angle"]
-                out.append(f"    with the ball's slip (mu = {rec['grip']['slip_test']['mu']:.2g}, "
+                law = SlipLaw.of(rec["grip"]["slip_test"])
+                out.append(f"    with the ball's slip ({law.text()}, "
                            f"plausible effects only): ball_angle "
                            f"{_num(pb['ball_angle'], '.3g')} -> {_num(ps, '.3g')} "
                            f"(x{_num(_ratio(pb['ball_angle'], ps), '.3g')})")
@@ -311,10 +317,10 @@ def _md_fit(d: Diagnosis) -> list[str]:
                          f"{_num(_ratio(pb[k], pa[k]), '.3g')} | |")
             if f"{key}_after_slip" in m:
                 ps = m[f"{key}_after_slip"]["rmse"]["ball_angle"]
-                mu = pr.summary["grip"]["slip_test"]["mu"]
+                law = SlipLaw.of(pr.summary["grip"]["slip_test"])
                 L.append(f"| {Path(pr.name).name} | {h:.0f} ms prediction {start}: "
                          f"ball_angle [rad], plausible effects with the ball's slip "
-                         f"(mu = {mu:.2g}) | {_num(pb['ball_angle'], '.3g')} | "
+                         f"({law.text()}) | {_num(pb['ball_angle'], '.3g')} | "
                          f"{_num(ps, '.3g')} | {_num(_ratio(pb['ball_angle'], ps), '.3g')} | |")
     return [*L, ""]
 
@@ -325,9 +331,10 @@ def _md_grip(d: Diagnosis) -> list[str]:
          "Friction demand: the friction coefficient (on a plate edge) that rolling without "
          "slip needs along the recording under the corrected model. Slip test: the ball alone "
          "under the measured frame motion, 100 ms ahead of the state fitted to the 100 ms "
-         "before each held-out window, rolling against friction-limited rolling with the "
-         "coefficient the training windows chose (docs/diagnosis.md).", "",
-         "| recording | demand p50 / p90 / p99 / max | where the max is | mu chosen | "
+         "before each held-out window, rolling against the slip law the training windows "
+         "chose: friction-limited rolling (Coulomb, mu) or linear creep (the spin's "
+         "relaxation time tau_s; docs/diagnosis.md).", "",
+         "| recording | demand p50 / p90 / p99 / max | where the max is | law chosen | "
          "ball [rad]: nominal, rolling -> slipping (ratio) | windows better / worse (p) | "
          "verdict |", "|---|---|---|---|---|---|---|"]
     for pr in d.parts:
@@ -341,7 +348,8 @@ def _md_grip(d: Diagnosis) -> list[str]:
         cells = "| | |"
         mu = "rolling"
         if st:
-            mu = "rolling" if st["mu"] is None else f"{st['mu']:.3g}"
+            law = SlipLaw.of(st)
+            mu = "rolling" if law is None else law.text()
             cells = (f"{st['ball_rmse_nominal_rolling']:.3g}, {st['ball_rmse_rolling']:.3g} -> "
                      f"{st['ball_rmse_slipping']:.3g} (x{st['improvement']:.2f}) | "
                      f"{st['windows_better']} / {st['windows_worse']} "
