@@ -175,8 +175,8 @@ def format_text(s: dict[str, Any]) -> str:
                            for k in pb if _num(pb[k]) != "n/a"))
             if f"{key}_after_slip" in m:
                 ps = m[f"{key}_after_slip"]["rmse"]["ball_angle"]
-                law = SlipLaw.of(rec["grip"]["slip_test"])
-                out.append(f"    with the ball's slip ({law.text()}, "
+                law = _slip_label(rec["grip"]["slip_test"], m[f"{key}_after_slip"])
+                out.append(f"    with the ball's slip ({law}, "
                            f"plausible effects only): ball_angle "
                            f"{_num(pb['ball_angle'], '.3g')} -> {_num(ps, '.3g')} "
                            f"(x{_num(_ratio(pb['ball_angle'], ps), '.3g')})")
@@ -317,12 +317,24 @@ def _md_fit(d: Diagnosis) -> list[str]:
                          f"{_num(_ratio(pb[k], pa[k]), '.3g')} | |")
             if f"{key}_after_slip" in m:
                 ps = m[f"{key}_after_slip"]["rmse"]["ball_angle"]
-                law = SlipLaw.of(pr.summary["grip"]["slip_test"])
+                law = _slip_label(pr.summary["grip"]["slip_test"], m[f"{key}_after_slip"])
                 L.append(f"| {Path(pr.name).name} | {h:.0f} ms prediction {start}: "
                          f"ball_angle [rad], plausible effects with the ball's slip "
-                         f"({law.text()}) | {_num(pb['ball_angle'], '.3g')} | "
+                         f"({law}) | {_num(pb['ball_angle'], '.3g')} | "
                          f"{_num(ps, '.3g')} | {_num(_ratio(pb['ball_angle'], ps), '.3g')} | |")
     return [*L, ""]
+
+
+def _slip_label(slip_test: dict[str, Any], pred: dict[str, Any]) -> str:
+    """The slip law of a prediction's row (under creep from a smoothed state: started rolling).
+
+    The relative spin is a state no smoother measures.
+    """
+    law = SlipLaw.of(slip_test)
+    text = law.text() if law is not None else "rolling"
+    if law is not None and law.states == 5 and pred.get("start") == "smoothed":
+        text += ", started rolling: a smoothed state has no spin"
+    return text
 
 
 def _md_grip(d: Diagnosis) -> list[str]:
