@@ -57,13 +57,18 @@ def _rigid_run(params: RigParams, duration: float = 0.6, sub: int = 20
         acc[k] = m.accelerations(x[:4], _torque(k * DT))[0]
         for s in range(sub):  # the torque at each sub-step's middle: smooth in time
             x = m.step(x, _torque((k + (s + 0.5) / sub) * DT), DT / sub, 1, 0.0)
-    t = DT * np.arange(n + 1)
+    return _frame_motion(xs, acc), xs
+
+
+def _frame_motion(xs: np.ndarray, acc: np.ndarray) -> Prepared:
+    """A Prepared of the frame motion of states xs on the grid (theta_ddot = acc, the torque
+    :func:`_torque`); the ball's measurements are not used."""
+    t = DT * np.arange(xs.shape[0])
     nan = np.full(t.size, np.nan)
-    prep = Prepared(t=t, theta=xs[:, 0], theta_dot=xs[:, 2], theta_ddot=acc,
+    return Prepared(t=t, theta=xs[:, 0], theta_dot=xs[:, 2], theta_ddot=acc,
                     u=np.array([_torque(v) for v in t]), psi_w=nan, psi_w_dot=nan.copy(),
                     ball_ok=np.ones(t.size, bool), frame_ok=np.ones(t.size, bool),
                     has_ball=True, latency0=0.0, noise={"camera": 1e-4, "theta": 0.0})
-    return prep, xs
 
 
 def test_rolling_ball_alone_follows_the_rigid_model_and_converges() -> None:
@@ -246,13 +251,7 @@ def test_the_ball_alone_creeps_as_the_coupled_model_under_its_frame_motion() -> 
     fine = _creep(m, x5, u_fine, DT / sub, tau)[::sub]
     acc = np.array([grip._creep_rhs(x, _torque(k * DT), 1.0 / tau, jb, rr, pt, *m.geom_args)[2]
                     for k, x in enumerate(fine)])
-    t = DT * np.arange(n + 1)
-    nan = np.full(t.size, np.nan)
-    prep = Prepared(t=t, theta=fine[:, 0], theta_dot=fine[:, 2], theta_ddot=acc,
-                    u=np.array([_torque(v) for v in t]), psi_w=nan, psi_w_dot=nan.copy(),
-                    ball_ok=np.ones(t.size, bool), frame_ok=np.ones(t.size, bool),
-                    has_ball=True, latency0=0.0, noise={"camera": 1e-4, "theta": 0.0})
-    ball = grip._Ball.of(RigParams(), prep, SensorCorrection())
+    ball = grip._Ball.of(RigParams(), _frame_motion(fine, acc), SensorCorrection())
     law = grip.SlipLaw(kind="creep", value=tau)
     rel0 = x5[4] - (x5[2] - lam0 * x5[3] / rr)
     errs = []

@@ -427,6 +427,11 @@ def _creep_coupled_rollout(x0, u, dt, ns, inv_tau, jb, rr, Pt, g0, g1, g2, g3, g
     return xs
 
 
+def _substeps(dt: float) -> int:
+    """Integration steps per grid step of dt: steps of at most :data:`MAX_STEP`."""
+    return max(int(np.ceil(dt / MAX_STEP - 1e-9)), 1)
+
+
 def slip_parameters(model: RigidModel) -> tuple[FloatArray, FloatArray, float, float, float]:
     """``(Pf, Pt, J_b, R_b, R)`` of a model for :func:`coupled_rollout`.
 
@@ -462,7 +467,7 @@ def coupled_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
         States (len(u) + 1, 4); NaN from a non-finite step on.
     """
     pf, pt, jb, rb, rr = slip_parameters(model)
-    ns = max(int(np.ceil(dt / MAX_STEP - 1e-9)), 1)
+    ns = _substeps(dt)
     x = np.zeros(6)
     x[:4] = x0[:4]
     return _coupled_rollout(x, np.ascontiguousarray(u, float), dt, ns, mu, pf, pt,
@@ -493,7 +498,7 @@ def creep_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
         States (len(u) + 1, 4); NaN from a non-finite step on.
     """
     pf, pt, jb, _, rr = slip_parameters(model)
-    ns = max(int(np.ceil(dt / MAX_STEP - 1e-9)), 1)
+    ns = _substeps(dt)
     lam = float(curve_terms(float(x0[1]), pf, *model.geom_args)[8])
     rel0 = float(x0[4]) if len(x0) > 4 else 0.0
     x = np.array([x0[0], x0[1], x0[2], x0[3], x0[2] - lam * x0[3] / rr + rel0], float)
@@ -581,7 +586,7 @@ class _Ball:
 
         ``z = (phi, phi_dot[, omega_b - omega_roll])``: the relative spin only under creep.
         """
-        ns = max(int(np.ceil(self.dt / MAX_STEP - 1e-9)), 1)
+        ns = _substeps(self.dt)
         if law is not None and law.kind == "creep":
             return _creep_ball_rollout(z[0], z[1], z[2] if len(z) > 2 else 0.0, j, n, self.th,
                                        self.thd, self.thdd, 1.0 / law.value, self.dt, ns,
