@@ -754,8 +754,9 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
     -------
     dict
         ``friction_demand`` (percentiles of mu_req, its maximum's time [s] and place [deg],
-        the smallest normal force [N], the share without contact), ``slip_test`` (the grid,
-        training costs, chosen mu, held-out RMS of the ball's in-frame angle [rad] rolling
+        the smallest normal force [N], the share without contact), ``slip_test`` (the grids,
+        training costs, the chosen ``law`` (None, ``"coulomb"`` or ``"creep"``) with its
+        ``mu`` [-] or ``tau_s`` [s], held-out RMS of the ball's in-frame angle [rad] rolling
         and slipping and the nominal model's rolling, windows better and worse, the
         randomisation test's p),
         ``verdict`` and ``meaning``.
