@@ -116,6 +116,9 @@ class PartResult:
         The same from the state each model fits to the horizon before each window
         (:func:`~bfr_diagnose.locate.causal_prediction_errors`; up to 400 traces, the
         open-loop panel of ``phi_dot.png``).
+    pred_causal_slip : dict or None
+        Where the ball slips, the same of the plausible effects with the grip's slip law
+        (up to 400 traces); else None.
     summary : dict
         Its JSON entry.
     """
@@ -138,6 +141,7 @@ class PartResult:
     pred_causal_before: dict[str, Any]
     pred_causal_after: dict[str, Any]
     summary: dict[str, Any]
+    pred_causal_slip: dict[str, Any] | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -601,7 +605,8 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
         smoothed["after_slip"] = prediction_errors(prep, corrected, res1.phi, res1.phi_dot,
                                                    s1, test_t, slip=law)
         causal["after_slip"] = causal_prediction_errors(prep, corrected, res1.phi,
-                                                        res1.phi_dot, s1, test_t, slip=law)
+                                                        res1.phi_dot, s1, test_t, slip=law,
+                                                        keep_traces=400)
     metrics = _metrics(part, before, after, located, smoothed, causal)
     summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],
                "duration": float(prep.t[-1] - prep.t[0]),
@@ -616,7 +621,8 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
                       sigma=part.sigma, test_mask=part.test, pred_raw=smoothed["raw"],
                       pred_before=smoothed["before"], pred_after=smoothed["after"],
                       pred_causal_raw=causal["raw"], pred_causal_before=causal["before"],
-                      pred_causal_after=causal["after"], summary=summary)
+                      pred_causal_after=causal["after"],
+                      pred_causal_slip=causal.get("after_slip"), summary=summary)
 
 
 def _located(name: str, t_res: np.ndarray, r0: np.ndarray, r1: np.ndarray,

@@ -609,6 +609,11 @@ class PhiDotProfiles:
         before, :func:`~bfr_diagnose.locate.causal_prediction_errors`) minus the measured
         phi_dot at the same instants (each in that model's contact angle; binned by the
         predicted phi). NaN where no held-out window reaches.
+    open_slip : ndarray or None
+        The same of the plausible effects with the ball's slip where the grip found it
+        (``corrected_params.yaml``'s model and the slip law), else None.
+    slip_law : str
+        That law (``SlipLaw.text``), or "".
     notes : list of str
         What each closed loop did.
     """
@@ -620,6 +625,8 @@ class PhiDotProfiles:
     open_nominal: np.ndarray
     open_corrected: np.ndarray
     notes: list[str]
+    open_slip: np.ndarray | None = None
+    slip_law: str = ""
 
     def rms(self, which: str) -> float:
         """RMS difference [rad/s] of a profile from the measured one over the common bins."""
@@ -671,6 +678,13 @@ def phi_dot_profiles(d: Diagnosis, pr: PartResult, duration: float = 15.0,
                               pr.pred_causal_before, pr.res_before.phi_dot, pr.prep.t, edges),
                           open_corrected=phi_dot_misfit_by_place(
                               pr.pred_causal_after, pr.res_after.phi_dot, pr.prep.t, edges),
+                          open_slip=(None if pr.pred_causal_slip is None else
+                                     phi_dot_misfit_by_place(pr.pred_causal_slip,
+                                                             pr.res_after.phi_dot, pr.prep.t,
+                                                             edges)),
+                          slip_law=(_slip_label(pr.summary["grip"]["slip_test"],
+                                                pr.pred_causal_slip)
+                                    if pr.pred_causal_slip is not None else ""),
                           notes=notes)
 
 
@@ -692,13 +706,16 @@ def _plot_phi_dot(plt: Any, d: Diagnosis, pr: PartResult, out: Path) -> str:
     ax.set_title("the ball's speed along the frame (closed loop: bfr's controller, not the "
                  "rig's)", fontsize=9)
     ax.legend(fontsize=7)
+    lines = [(prof.open_nominal, "C0", "nominal", "nominal physics"),
+             (prof.open_corrected, "C1", "corrected", "corrected physics")]
+    if prof.open_slip is not None:
+        lines.append((prof.open_slip, "C2", "slip",
+                      f"plausible effects with the ball's slip ({prof.slip_law})"))
     rms_open = {k: _finite(float(np.sqrt(np.nanmean(v ** 2)))) if np.isfinite(v).any()
-                else None for k, v in (("nominal", prof.open_nominal),
-                                       ("corrected", prof.open_corrected))}
-    for v, colour, label in ((prof.open_nominal, "C0", "nominal"),
-                             (prof.open_corrected, "C1", "corrected")):
-        over = rms_open[label]
-        ax2.plot(deg, v, colour + ".-", label=f"{label} physics (rms over bins "
+                else None for v, _, k, _ in lines}
+    for v, colour, key, label in lines:
+        over = rms_open[key]
+        ax2.plot(deg, v, colour + ".-", label=f"{label} (rms over bins "
                  + (f"{over:.3f}" if over is not None else "n/a") + " rad/s)")
     ax2.set_ylabel("RMS predicted - measured\nphi_dot [rad/s]")
     ax2.set_title("under the recorded frame motion: phi_dot 100 ms ahead of the state each "
@@ -715,7 +732,11 @@ def _plot_phi_dot(plt: Any, d: Diagnosis, pr: PartResult, out: Path) -> str:
         "open_loop_misfit_nominal": [_finite(v) for v in prof.open_nominal],
         "open_loop_misfit_corrected": [_finite(v) for v in prof.open_corrected],
         "open_loop_rms_nominal": rms_open["nominal"],
-        "open_loop_rms_corrected": rms_open["corrected"], "notes": prof.notes})
+        "open_loop_rms_corrected": rms_open["corrected"],
+        **({"open_loop_misfit_slip": [_finite(v) for v in prof.open_slip],
+            "open_loop_rms_slip": rms_open["slip"], "slip_law": prof.slip_law}
+           if prof.open_slip is not None else {}),
+        "notes": prof.notes})
     return _save(plt, fig, out, "phi_dot.png")
 
 
