@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from bfr_diagnose.cli import main as diagnose_main
-from bfr_diagnose.locate import _rigid_rollout
+from bfr_diagnose.locate import _rigid_rollout, prediction_errors
 from bfr_diagnose.preprocess import Prepared, SensorCorrection, prepare
 from bfr_diagnose.residual import ResidualEvaluator
 from bfr_diagnose.synth import SynthConfig, contact_recording, stabilised_recording
@@ -293,6 +293,35 @@ def test_coupled_slip_follows_the_contact_model(amp: float, mu: float) -> None:
 
 # -- verdicts on closed loops ------------------------------------------------------------------
 
+def test_the_creeping_spin_is_the_lag_of_the_measured_rolling_rate() -> None:
+    """Under creep the spin is a first-order lag of the rolling rate, whatever moves the
+    frame and ball (``omega_b' = -(omega_b - omega_roll) / tau_s``): :meth:`SlipLaw.spin`
+    from the coupled creep model's own frame rate, contact angle and rate on a 4, 2 and 1 ms
+    grid gives that model's relative spin (its fifth state) once the start is forgotten
+    (after 12 tau_s: the model starts 5 rad/s off rolling, the lag from rolling), to second
+    order in the grid step (measured 5.3e-3, 1.3e-3, 3.3e-4 rad/s against a spin of up to
+    17 rad/s). Coulomb friction has no such spin: None."""
+    m = RigidModel(RigParams())
+    _, _, _, _, rr = grip.slip_parameters(m)
+    tau, dt_fine, n = 0.05, 1e-4, 10000
+    lam0 = float(m.curve.speed(np.array([0.05]))[0])
+    x5 = np.array([0.0, 0.05, 0.0, 0.3, -lam0 * 0.3 / rr + 5.0])
+    u = np.array([_torque((k + 0.5) * dt_fine) for k in range(n)])
+    xs = _creep(m, x5, u, dt_fine, tau)
+    rel = xs[:, 4] - (xs[:, 2] - m.curve.speed(xs[:, 1]) * xs[:, 3] / rr)
+    law = grip.SlipLaw(kind="creep", value=tau)
+    errs = []
+    for dt in (4e-3, 2e-3, 1e-3):
+        g = xs[::round(dt / dt_fine)]
+        r = law.spin(m, g[:, 2], g[:, 1], g[:, 3], np.ones(len(g), bool), dt)
+        late = np.arange(len(g)) * dt > 12 * tau
+        errs.append(float(np.max(np.abs(r - rel[::round(dt / dt_fine)])[late])))
+    assert errs[1] < 2e-3 < 10.0 < np.max(np.abs(rel)), errs
+    assert 3.0 < errs[0] / errs[1] < 5.0 and 3.0 < errs[1] / errs[2] < 5.0, errs
+    assert grip.SlipLaw(kind="coulomb", value=0.2).spin(
+        m, g[:, 2], g[:, 1], g[:, 3], np.ones(len(g), bool), 1e-3) is None
+
+
 def _grip_of(rec) -> dict:  # noqa: ANN001
     """The grip of a recording under the nominal model (alternate seconds held out)."""
     base = RigParams()
@@ -361,6 +390,15 @@ def test_a_contact_model_ball_that_creeps_gets_creep(damping: float, seed: int) 
     assert st["law"] == "creep", st
     assert max(tau_true, grip.TAU_GRID[0]) / 1.5 <= st["tau_s"] <= tau_true * 1.5, (st, tau_true)
     assert g["verdict"] == "slips" and st["improvement"] > 1.5, g
+    # the smoothed start of the coupled prediction: the measured state and the spin the law
+    # implies from the rolling rate before it (measured 0.58x and 0.49x the rolling model's
+    # error; the creep model started rolling was 1.95x and 1.03x it)
+    prep = prepare(rec)
+    res = ResidualEvaluator(prep).evaluate(base, SensorCorrection())
+    args = (prep, base, res.phi, res.phi_dot, SensorCorrection(), np.floor(prep.t) % 2 == 1)
+    rolling = prediction_errors(*args)["rmse"]["ball_angle"]
+    creeping = prediction_errors(*args, slip=grip.SlipLaw(kind="creep", value=tau_true))
+    assert creeping["rmse"]["ball_angle"] < 0.7 * rolling, (creeping["rmse"], rolling)
 
 
 @pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ntnu-rig is absent")
@@ -395,6 +433,9 @@ def test_the_real_ball_slips_where_the_rig_brakes_hard(name: str, verdict: str,
         # the selection with its suspect ball inertia 1.14x)
         with_slip = m["prediction_causal_improvement_with_slip"]["ball_angle"]
         assert with_slip > 2.2 and with_slip > m["prediction_causal_improvement"]["ball_angle"]
+        # from the smoothed state, the spin the creep implies from the rolling rate before
+        # each start (measured 1.59x; started rolling 1.08x)
+        assert m["prediction_improvement_with_slip"]["ball_angle"] > 1.4, m
         assert any("stand-in for the slip" in n for n in s["notes"])  # the suspect ball inertia
         assert prof["slip_law"].startswith("creep") and len(prof["open_loop_misfit_slip"]) == 36
         assert prof["open_loop_rms_slip"] < 0.7 * prof["open_loop_rms_corrected"], prof

@@ -70,7 +70,9 @@ friction coefficient on a plate edge.
    inf`` the spinless ball of mu = 0. The spin is a fifth state at every instant: each
    window's start fits the relative spin beside ``(phi, phi_dot)`` (from 0), the coupled
    predictions fit it as a fifth start state (:func:`bfr_diagnose.locate.
-   causal_prediction_errors`); a smoothed start has none and starts rolling. Classical RK4
+   causal_prediction_errors`); a smoothed start takes the spin the law implies: the spin is
+   a first-order lag of the rolling rate, ``omega_b' = -(omega_b - omega_roll) / tau_s``,
+   so the measured rolling rate before the start gives it (:meth:`SlipLaw.spin`). Classical RK4
    (coupled) and the midpoint rule (ball alone) in steps of at most :data:`MAX_STEP`, far
    below the relaxation time of the smallest ``tau_s`` tried. Neither the rigid model nor
    the contact model (Coulomb at the edges, a stiff stick spring) has this law: a ball that
@@ -506,6 +508,21 @@ def creep_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
                                   rr, pt, *model.geom_args)[:, :4]
 
 
+@njit
+def _creep_lag(w, ok, dt, tau_s):  # noqa: ANN001, ANN202
+    """The relative spin ``r`` of :meth:`SlipLaw.spin` from the rolling rate w on the grid."""
+    a = np.exp(-dt / tau_s)
+    b = tau_s * (1.0 - a) / dt
+    out = np.full(w.size, np.nan)
+    r = 0.0
+    for k in range(w.size):
+        if not ok[k]:
+            continue
+        r = a * r - b * (w[k] - w[k - 1]) if k > 0 and ok[k - 1] else 0.0
+        out[k] = r
+    return out
+
+
 @dataclass(frozen=True, kw_only=True)
 class SlipLaw:
     """How a slipping ball's spin follows its rolling: Coulomb friction or linear creep.
@@ -537,6 +554,48 @@ class SlipLaw:
     def states(self) -> int:
         """Start states a rollout takes: the relative spin is a fifth one under creep."""
         return 5 if self.kind == "creep" else 4
+
+    def spin(self, model: RigidModel, theta_dot: FloatArray, phi: FloatArray,
+             phi_dot: FloatArray, usable: NDArray[np.bool_], dt: float) -> FloatArray | None:
+        """The ball's relative spin along a recording from its measured rolling rate (creep).
+
+        Under creep (module docstring, 5) the spin obeys ``omega_b' = -(omega_b -
+        omega_roll) / tau_s`` whatever moves the frame and the ball: it is a first-order lag
+        of the rolling rate ``omega_roll = theta_dot - lam(phi) phi_dot / R``, so the
+        relative spin ``r = omega_b - omega_roll`` at any sample follows from the measured
+        rolling rate before it. Exact for a rolling rate linear between grid samples::
+
+            r_{k+1} = a r_k - tau_s (1 - a) (w_{k+1} - w_k) / dt,   a = exp(-dt / tau_s)
+
+        Each usable stretch (finite rates, ``usable``) starts rolling (``r = 0``); that
+        start is forgotten as ``exp(-t / tau_s)``. The smoothed start of a creeping ball
+        (:func:`bfr_diagnose.locate.prediction_errors`): the state a smoother measures plus
+        the spin the law implies.
+
+        Parameters
+        ----------
+        model : RigidModel
+            The model (its curve's ``lam`` and rolling radius R).
+        theta_dot, phi, phi_dot : ndarray
+            Frame rate [rad/s], contact angle [rad] and its rate [rad/s] on the grid (NaN
+            where unknown).
+        usable : ndarray of bool
+            Grid samples to use.
+        dt : float
+            Grid step [s].
+
+        Returns
+        -------
+        ndarray or None
+            ``r`` on the grid [rad/s] (NaN where not usable); None under Coulomb friction,
+            whose spin no measured rate fixes.
+        """
+        if self.kind != "creep":
+            return None
+        ok = usable & np.isfinite(theta_dot) & np.isfinite(phi) & np.isfinite(phi_dot)
+        w = np.full(phi.size, np.nan)
+        w[ok] = theta_dot[ok] - model.curve.speed(phi[ok]) * phi_dot[ok] / model.P[I_R]
+        return _creep_lag(w, ok, dt, self.value)
 
     def text(self) -> str:
         """``mu = 0.17`` or ``creep, tau_s = 0.1 s``."""

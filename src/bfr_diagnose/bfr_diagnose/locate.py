@@ -474,8 +474,10 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
     keep_traces : int
         Return this many predicted traces (for the overlay plot).
     slip : SlipLaw or None
-        How the ball may slip (:class:`bfr_diagnose.grip.SlipLaw`: Coulomb friction or
-        creep, rolling at the start); None (default): it rolls.
+        How the ball may slip (:class:`bfr_diagnose.grip.SlipLaw`): Coulomb friction,
+        rolling at the start, or creep, with the relative spin its law implies from the
+        measured rolling rate before the start (:meth:`SlipLaw.spin
+        <bfr_diagnose.grip.SlipLaw.spin>`); None (default): it rolls.
 
     Returns
     -------
@@ -486,11 +488,15 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
     """
     pred = _predictor(prep, params, sensor, horizon, every, slip)
     scores = _Scores(pred, keep_traces)
+    spin = (slip.spin(pred.model, prep.theta_dot, phi, phi_dot, pred.usable, pred.dt)
+            if prep.has_ball and slip is not None else None)
     for i0 in pred.starts(test_mask_t):
         if prep.has_ball and not (np.isfinite(phi[i0]) and np.isfinite(phi_dot[i0])):
             continue
         x0 = np.array([pred.theta[i0], phi[i0] if prep.has_ball else 0.0,
                        prep.theta_dot[i0], phi_dot[i0] if prep.has_ball else 0.0])
+        if spin is not None and np.isfinite(spin[i0]):
+            x0 = np.append(x0, spin[i0])
         xs = pred.rollout(x0, i0, pred.nh)
         if not np.all(np.isfinite(xs)):
             continue

@@ -326,14 +326,17 @@ def _md_fit(d: Diagnosis) -> list[str]:
 
 
 def _slip_label(slip_test: dict[str, Any], pred: dict[str, Any]) -> str:
-    """The slip law of a prediction's row (under creep from a smoothed state: started rolling).
+    """The slip law of a prediction's row, and where a creeping spin's start comes from.
 
-    The relative spin is a state no smoother measures.
+    Under creep the relative spin is a state no smoother measures: from a smoothed state it
+    is the lag of the measured rolling rate before the start (:meth:`SlipLaw.spin`), from a
+    fitted one a fifth unknown of the fit.
     """
     law = SlipLaw.of(slip_test)
     text = law.text() if law is not None else "rolling"
-    if law is not None and law.states == 5 and pred.get("start") == "smoothed":
-        text += ", started rolling: a smoothed state has no spin"
+    if law is not None and law.states == 5:
+        text += (", the spin the lag of the rolling rate before the start"
+                 if pred.get("start") == "smoothed" else ", the spin fitted with the start")
     return text
 
 
