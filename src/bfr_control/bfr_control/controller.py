@@ -326,9 +326,7 @@ class OrbitalController:
         if not lead > 0.0:
             return x
         n = max(1, math.ceil(lead / 1e-3))
-        x6 = np.zeros(6)
-        x6[:4] = x
-        return self.model.step(x6, u, lead / n, n)[:4]
+        return self.model.step(self.model.state(x), u, lead / n, n)[:4]
 
     def step(self, t: float, theta: float, theta_dot: float,
              ball: BallObservation | Iterable[BallObservation] | None = None,

@@ -37,7 +37,7 @@ from bfr_diagnose.effects import (
     sensor_correction,
     sensor_names_for,
 )
-from bfr_diagnose.grip import SlipLaw, grip
+from bfr_diagnose.grip import TAU_GRID, SlipLaw, grip
 from bfr_diagnose.identify import (
     DISAGREE_Z,
     Part,
@@ -314,6 +314,11 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
         mu = float(np.median(slipping))
         corrected = corrected.replace(**{"contact.static_friction": mu,
                                          "contact.dynamic_friction": mu})
+    creeping = [pr.summary["grip"]["slip_test"]["tau_s"] for pr in results
+                if pr.summary["grip"].get("verdict") == "slips"
+                and pr.summary["grip"]["slip_test"]["law"] == "creep"]
+    if creeping:  # a creeping spin: a term of the rigid model (bfr_model.dynamics)
+        corrected = corrected.replace(**{"ball.creep_time": float(np.median(creeping))})
     findings = _summary(recordings=recordings, results=results, opts=opts, sel=sel,
                         null=null, suspects=suspects, between=between, notes=notes,
                         base=base)
@@ -607,6 +612,15 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
         causal["after_slip"] = causal_prediction_errors(prep, corrected, res1.phi,
                                                         res1.phi_dot, s1, test_t, slip=law,
                                                         keep_traces=400)
+        if law is not None and law.kind == "creep":
+            ball_grip["equation_error"] = _creep_rows(part, corrected, s1, res1, law.value)
+            ee = ball_grip["equation_error"]
+            ball_grip["meaning"] += (
+                "; the ball's row of the equation error, another method (the spin the lag of "
+                f"the measured rolling rate), agrees: held out {ee['heldout_rolling']:.2f} -> "
+                f"{ee['heldout_creep']:.2f} x noise (the selection with its suspects "
+                f"{ee['heldout_selection']:.2f}), its training rows choose tau_s = "
+                f"{ee['tau_s_train']:.2g} s")
     metrics = _metrics(part, before, after, located, smoothed, causal)
     summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],
                "duration": float(prep.t[-1] - prep.t[0]),
@@ -623,6 +637,38 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
                       pred_causal_raw=causal["raw"], pred_causal_before=causal["before"],
                       pred_causal_after=causal["after"],
                       pred_causal_slip=causal.get("after_slip"), summary=summary)
+
+
+def _creep_rows(part: Part, corrected: RigParams, sensor: SensorCorrection, res_sel: Residual,
+                tau_s: float) -> dict[str, Any]:
+    """The equation error of a creeping ball beside rolling's: the slip test by another method.
+
+    The slip test (:func:`bfr_diagnose.grip.grip`) predicts windows; the equation error
+    (:mod:`bfr_diagnose.residual`, a creeping ball) needs no start and no integration: the
+    spin is the lag of the measured rolling rate. The ball's and the frame's rows of the
+    corrected model, rolling and creeping with the slip test's tau_s, held out over their
+    noise; the selection's (with its suspects) beside them; and the tau_s of
+    :data:`~bfr_diagnose.grip.TAU_GRID` whose ball row is smallest on the training samples.
+    """
+    ev, test = part.ev, part.test
+
+    def rms(res: Residual, row: int, mask: NDArray[np.bool_]) -> float:
+        return float(rms_by_block(res.rows[row - 1], mask) / part.sigma[row - 1])
+
+    train = {f"{t:g}": rms(ev.evaluate(corrected, sensor, creep=t), 2, ~test)
+             for t in TAU_GRID}
+    rolling = ev.evaluate(corrected, sensor)
+    creep = ev.evaluate(corrected, sensor, creep=tau_s)
+    out: dict[str, Any] = {
+        "unit": "x noise (held-out RMS over the row's noise)",
+        "heldout_rolling": rms(rolling, 2, test), "heldout_creep": rms(creep, 2, test),
+        "heldout_selection": rms(res_sel, 2, test), "tau_s": tau_s,
+        "train_rolling": rms(rolling, 2, ~test), "train": train,
+        "tau_s_train": float(min(TAU_GRID, key=lambda t: train[f"{t:g}"]))}
+    if 1 in part.rows:
+        out.update(frame_heldout_rolling=rms(rolling, 1, test),
+                   frame_heldout_creep=rms(creep, 1, test))
+    return out
 
 
 def _located(name: str, t_res: np.ndarray, r0: np.ndarray, r1: np.ndarray,

@@ -42,12 +42,15 @@ friction coefficient on a plate edge.
    likely, :data:`FLIPS` random flips, a fixed seed) says whether slipping predicts the
    ball better than chance would. It weighs each window by how much it changes: a few
    braking windows mended and many gentle ones slightly worse count as what they are.
+   Creep needs no coefficient the demand reaches (its spin lags whatever the demand), so
+   it is tried even where rolling needs less than every mu of the grid (no Coulomb is
+   tried there).
 3. **Verdict.** ``slips`` when the held-out RMS improves by at least :data:`MIN_GAIN` and the
    randomisation test's p-value is below :data:`ALPHA`; ``rolls`` otherwise (the report then gives
    the largest coefficient the training windows rejected: mu is above it).
 
 4. **Frame and ball together, slipping** (:func:`coupled_rollout`: the short-horizon
-   predictions of :mod:`bfr_diagnose.locate` with ``slip_mu``). The spin as a fifth state
+   predictions of :mod:`bfr_diagnose.locate` with ``slip``). The spin as a fifth state
    with the rolling constraint ``omega_b = theta_dot - lam phi_dot / R`` replaced by its
    Lagrange multiplier, the friction torque tau_f on the spin: ``J_b omega_b' = tau_f`` and
    the generalised forces ``(-tau_f, lam tau_f / R)`` on ``(theta, phi)`` of the model
@@ -72,21 +75,28 @@ friction coefficient on a plate edge.
    predictions fit it as a fifth start state (:func:`bfr_diagnose.locate.
    causal_prediction_errors`); a smoothed start takes the spin the law implies: the spin is
    a first-order lag of the rolling rate, ``omega_b' = -(omega_b - omega_roll) / tau_s``,
-   so the measured rolling rate before the start gives it (:meth:`SlipLaw.spin`). Classical RK4
-   (coupled) and the midpoint rule (ball alone) in steps of at most :data:`MAX_STEP`, far
-   below the relaxation time of the smallest ``tau_s`` tried. Neither the rigid model nor
-   the contact model (Coulomb at the edges, a stiff stick spring) has this law: a ball that
-   creeps is reported, its coefficient is not written into the parameters. The friction's
+   so the measured rolling rate before the start gives it (:meth:`SlipLaw.spin`). The same
+   lag puts the law into the equation error (:mod:`bfr_diagnose.residual`, a creeping ball:
+   no start, no integration), which the diagnosis reports beside the windows' verdict: the
+   ball's row rolling and creeping, held out, and the tau_s its training samples choose
+   (another method, the same law). Classical RK4 (coupled) and the midpoint rule (ball
+   alone) in steps of at most :data:`MAX_STEP` and a quarter of tau_s (:func:`_substeps`:
+   the relaxation time at the grid's smallest tau_s, 0.02 s, is 7.6 ms, under four 2-ms
+   steps, still 2.5e-5 rad from a 20-fold finer step). The rigid model the simulator runs
+   has the law (``ball.creep_time``, :func:`bfr_model.dynamics.creep_terms`, the kernel
+   these rollouts use): where the ball creeps the diagnosis writes tau_s there. The
+   contact model (Coulomb at the edges, a stiff stick spring) does not have it. The friction's
    power ``tau_f (omega_b - omega_roll) = -(J_b / tau_s) (omega_b - omega_roll)^2`` is
    never positive.
 
 Each grid is walked away from rolling (mu down, tau_s up) and stops once the training cost
 has risen after a fall, or twice without one (the costs are unimodal in every case seen).
 
-Slip is not a term of the rigid model the simulator runs; Coulomb slip is one of the contact
-model (``contact.static_friction`` and ``contact.dynamic_friction``), which the report names. The
+Coulomb slip is not a term of the rigid model the simulator runs; it is one of the contact
+model (``contact.static_friction`` and ``contact.dynamic_friction``), which the report names;
+creep is one of the rigid model (``ball.creep_time``). The
 diagnosis's predictions carry it (4): where the ball slips, the plausible effects (those
-``corrected_params.yaml`` holds) with mu predict the ball beside the selection's model. The
+``corrected_params.yaml`` holds) with the law predict the ball beside the selection's model. The
 test needs a ball on a turning frame; a held frame or a frame alone is not tested.
 """
 
@@ -101,6 +111,7 @@ from bfr_model.dynamics import (
     I_JB,
     I_R,
     RigidModel,
+    creep_terms,
     curve_terms,
     forced_terms,
     mass_terms,
@@ -114,8 +125,9 @@ from scipy.optimize import least_squares
 
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 
-__all__ = ["ALPHA", "FLIPS", "MAX_STEP", "MIN_GAIN", "MU_GRID", "TAU_GRID", "SlipLaw",
-           "coupled_rollout", "creep_rollout", "grip", "slip_parameters"]
+__all__ = ["ALPHA", "FLIPS", "MAX_STEP", "MIN_GAIN", "MU_GRID", "STATE_SCALE", "TAU_GRID",
+           "SlipLaw", "coupled_rollout", "creep_lag", "creep_rollout", "grip",
+           "slip_parameters"]
 
 FloatArray = NDArray[np.float64]
 
@@ -139,8 +151,13 @@ FLIPS = 20000
 #: sub-steps). Halving it moves the slip test's figures on the NTNU logs by < 1 %.
 MAX_STEP = 0.002
 
-#: Scales of a window's start in its fit: phi [rad], phi_dot [rad/s], relative spin [rad/s].
-_START_SCALE = np.array([1e-3, 0.1, 1.0])
+#: Scale of each state in a start's fit: theta, phi [rad], theta_dot, phi_dot [rad/s] and (under
+#: creep) the ball's relative spin [rad/s] (``x_scale`` of the solver; here and in
+#: :func:`bfr_diagnose.locate.causal_prediction_errors`).
+STATE_SCALE = np.array([1e-3, 1e-3, 0.1, 0.1, 1.0])
+
+#: ... of a window's start of the ball alone: phi, phi_dot, relative spin.
+_START_SCALE = STATE_SCALE[[1, 3, 4]]
 
 #: Spacing of the training windows [s] (the held-out ones are the predictions' spacing).
 _TRAIN_EVERY = 0.4
@@ -386,23 +403,24 @@ def _coupled_rollout(x0, u, dt, ns, mu, Pf, Pt, g0, g1, g2, g3, g4, g5, g6, g7, 
 
 
 @njit
-def _creep_rhs(x, u, inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4, g5, g6, g7):  # noqa: ANN001, ANN202
-    """``d/dt [theta, phi, theta_dot, phi_dot, omega_b]`` under linear creep (docstring, 5)."""
-    lam = curve_terms(x[1], Pt, g0, g1, g2, g3, g4, g5, g6, g7)[8]
-    tau = -jb * inv_tau * (x[4] - (x[2] - lam * x[3] / rr))
-    a = forced_terms(x[0], x[1], x[2], x[3], u, -tau, lam * tau / rr, Pt, g0, g1, g2, g3, g4,
-                     g5, g6, g7)
+def _creep_rhs(x, u, inv_tau, jb, Pt, g0, g1, g2, g3, g4, g5, g6, g7):  # noqa: ANN001, ANN202
+    """``d/dt [theta, phi, theta_dot, phi_dot, omega_b]`` under linear creep (docstring, 5).
+
+    The rigid model's own creep (:func:`bfr_model.dynamics.creep_terms`, the simulator's).
+    """
+    a = creep_terms(x[0], x[1], x[2], x[3], x[4], u, inv_tau, jb, Pt, g0, g1, g2, g3, g4, g5,
+                    g6, g7)
     out = np.empty(5)
     out[0] = x[2]
     out[1] = x[3]
     out[2] = a[0]
     out[3] = a[1]
-    out[4] = tau / jb
+    out[4] = a[2]
     return out
 
 
 @njit
-def _creep_coupled_rollout(x0, u, dt, ns, inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4, g5, g6, g7):  # noqa: ANN001, ANN202
+def _creep_coupled_rollout(x0, u, dt, ns, inv_tau, jb, Pt, g0, g1, g2, g3, g4, g5, g6, g7):  # noqa: ANN001, ANN202
     """States ``[theta, phi, theta_dot, phi_dot, omega_b]`` (n + 1, 5) under creep.
 
     ``x0`` the same five at the start; ``ns`` classical RK4 steps per grid step of dt,
@@ -415,13 +433,12 @@ def _creep_coupled_rollout(x0, u, dt, ns, inv_tau, jb, rr, Pt, g0, g1, g2, g3, g
     h = dt / ns
     for k in range(n):
         for _ in range(ns):
-            k1 = _creep_rhs(x, u[k], inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4, g5, g6, g7)
-            k2 = _creep_rhs(x + 0.5 * h * k1, u[k], inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4,
-                            g5, g6, g7)
-            k3 = _creep_rhs(x + 0.5 * h * k2, u[k], inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4,
-                            g5, g6, g7)
-            k4 = _creep_rhs(x + h * k3, u[k], inv_tau, jb, rr, Pt, g0, g1, g2, g3, g4, g5, g6,
-                            g7)
+            k1 = _creep_rhs(x, u[k], inv_tau, jb, Pt, g0, g1, g2, g3, g4, g5, g6, g7)
+            k2 = _creep_rhs(x + 0.5 * h * k1, u[k], inv_tau, jb, Pt, g0, g1, g2, g3, g4, g5,
+                            g6, g7)
+            k3 = _creep_rhs(x + 0.5 * h * k2, u[k], inv_tau, jb, Pt, g0, g1, g2, g3, g4, g5,
+                            g6, g7)
+            k4 = _creep_rhs(x + h * k3, u[k], inv_tau, jb, Pt, g0, g1, g2, g3, g4, g5, g6, g7)
             x = x + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
         if not (np.isfinite(x[1]) and abs(x[3]) < 1e3):
             return xs
@@ -429,9 +446,16 @@ def _creep_coupled_rollout(x0, u, dt, ns, inv_tau, jb, rr, Pt, g0, g1, g2, g3, g
     return xs
 
 
-def _substeps(dt: float) -> int:
-    """Integration steps per grid step of dt: steps of at most :data:`MAX_STEP`."""
-    return max(int(np.ceil(dt / MAX_STEP - 1e-9)), 1)
+def _substeps(dt: float, tau_s: float | None = None) -> int:
+    """Integration steps per grid step of dt: steps of at most :data:`MAX_STEP`.
+
+    Under creep also at most a quarter of tau_s: the relative spin relaxes at up to about
+    ``2.6 / tau_s`` (module docstring, 5; the seed's ball), and the explicit steps stay well
+    inside their stability limits (RK4 2.8, the midpoint rule 2) at ``h 2.6 / tau_s <= 0.65``.
+    Every tau_s of :data:`TAU_GRID` keeps MAX_STEP.
+    """
+    h = MAX_STEP if tau_s is None else min(MAX_STEP, 0.25 * tau_s)
+    return max(int(np.ceil(dt / h - 1e-9)), 1)
 
 
 def slip_parameters(model: RigidModel) -> tuple[FloatArray, FloatArray, float, float, float]:
@@ -500,19 +524,24 @@ def creep_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
         States (len(u) + 1, 4); NaN from a non-finite step on.
     """
     pf, pt, jb, _, rr = slip_parameters(model)
-    ns = _substeps(dt)
+    ns = _substeps(dt, tau_s)
     lam = float(curve_terms(float(x0[1]), pf, *model.geom_args)[8])
     rel0 = float(x0[4]) if len(x0) > 4 else 0.0
     x = np.array([x0[0], x0[1], x0[2], x0[3], x0[2] - lam * x0[3] / rr + rel0], float)
     return _creep_coupled_rollout(x, np.ascontiguousarray(u, float), dt, ns, 1.0 / tau_s, jb,
-                                  rr, pt, *model.geom_args)[:, :4]
+                                  pt, *model.geom_args)[:, :4]
 
 
 @njit
-def _creep_lag(w, ok, dt, tau_s):  # noqa: ANN001, ANN202
-    """The relative spin ``r`` of :meth:`SlipLaw.spin` from the rolling rate w on the grid."""
+def creep_lag(w, ok, dt, tau_s):  # noqa: ANN001, ANN201
+    """The relative spin ``r = omega_b - omega_roll`` of a creeping ball [rad/s].
+
+    From its rolling rate ``w = omega_roll`` on a grid of step dt [s], usable where ``ok``
+    (each usable stretch starts rolling); tau_s [s] the spin's relaxation time. The exact
+    recursion of :meth:`SlipLaw.spin` (its docstring).
+    """
     a = np.exp(-dt / tau_s)
-    b = tau_s * (1.0 - a) / dt
+    b = -np.expm1(-dt / tau_s) * tau_s / dt  # (1 - a) tau_s / dt without cancellation
     out = np.full(w.size, np.nan)
     r = 0.0
     for k in range(w.size):
@@ -595,7 +624,7 @@ class SlipLaw:
         ok = usable & np.isfinite(theta_dot) & np.isfinite(phi) & np.isfinite(phi_dot)
         w = np.full(phi.size, np.nan)
         w[ok] = theta_dot[ok] - model.curve.speed(phi[ok]) * phi_dot[ok] / model.P[I_R]
-        return _creep_lag(w, ok, dt, self.value)
+        return creep_lag(w, ok, dt, self.value)
 
     def text(self) -> str:
         """``mu = 0.17`` or ``creep, tau_s = 0.1 s``."""
@@ -645,15 +674,14 @@ class _Ball:
 
         ``z = (phi, phi_dot[, omega_b - omega_roll])``: the relative spin only under creep.
         """
-        ns = _substeps(self.dt)
         if law is not None and law.kind == "creep":
             return _creep_ball_rollout(z[0], z[1], z[2] if len(z) > 2 else 0.0, j, n, self.th,
-                                       self.thd, self.thdd, 1.0 / law.value, self.dt, ns,
-                                       self.pf, self.pt, *self.model.geom_args, self.jb,
-                                       self.rr)
+                                       self.thd, self.thdd, 1.0 / law.value, self.dt,
+                                       _substeps(self.dt, law.value), self.pf, self.pt,
+                                       *self.model.geom_args, self.jb, self.rr)
         return _rollout(z[0], z[1], j, n, self.th, self.thd, self.thdd,
-                        -1.0 if law is None else law.value, self.dt, ns, self.pf, self.pt,
-                        *self.model.geom_args, self.jb, self.rb, self.rr)
+                        -1.0 if law is None else law.value, self.dt, _substeps(self.dt),
+                        self.pf, self.pt, *self.model.geom_args, self.jb, self.rb, self.rr)
 
     def in_frame(self, phi: FloatArray) -> FloatArray:
         """The ball's polar angle in the frame [rad] at contact angles phi."""
@@ -840,10 +868,6 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
         out.update(verdict="not tested", meaning=f"too few windows ({len(train)} training, "
                    f"{len(held)} held out)")
         return out
-    if not grid:
-        out.update(verdict="rolls", meaning=f"rolling needs mu <= {top:.3g} everywhere: "
-                   f"below every coefficient tried ({MU_GRID[0]})")
-        return out
     costs: dict[str, FloatArray] = {"rolling": _scores(ball, train, meas, phi, phi_dot, nw, nh,
                                                         None)}
     laws: dict[str, SlipLaw | None] = {"rolling": None}
@@ -908,9 +932,12 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
             f"the ball slips on the plate edges, its spin lagging its rolling and catching "
             f"up over about {law.value:.2g} s: "
             f"linear creep at the plate edges (J_b omega_b' = -(J_b / tau_s) (omega_b - "
-            f"omega_roll), tau_s = {law.value:.2g} s) {held_out}, better than any Coulomb "
-            f"coefficient on the training windows (rolling needs up to {top:.2f}); neither "
-            f"the rigid model nor the contact model (Coulomb at the edges) has this law"))
+            f"omega_roll), tau_s = {law.value:.2g} s) {held_out}, "
+            + (f"better than any Coulomb coefficient on the training windows (rolling "
+               f"needs up to {top:.2f})" if grid else
+               f"where rolling needs mu <= {top:.2g} (below every Coulomb coefficient "
+               f"tried, {MU_GRID[0]})") + f"; the rigid model runs it with ball.creep_time = "
+            f"{law.value:.2g} s"))
     else:
         tried = "rolling" if law is None else law.text()
         bound = (f"; the data reject mu <= {max(rejected):.2g}" if rejected else "")

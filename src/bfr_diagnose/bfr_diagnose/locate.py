@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 from scipy.stats import chi2
 
-from bfr_diagnose.grip import SlipLaw
+from bfr_diagnose.grip import STATE_SCALE, SlipLaw
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 from bfr_diagnose.residual import ROW_NAMES, Residual
 
@@ -387,6 +387,8 @@ def _predictor(prep: Prepared, params: RigParams, sensor: SensorCorrection | Non
     """The :class:`_Predictor` of a model on a recording under a sensor correction."""
     dt = float(prep.t[1] - prep.t[0])
     sensor = sensor or SensorCorrection()
+    if slip is None and params.ball.creep_time > 0.0:  # the model's own ball creeps
+        slip = SlipLaw(kind="creep", value=params.ball.creep_time)
     if prep.frame_held:  # the frame does not move: a frame too heavy to turn
         params = params.replace(**{"frame.inertia": 1e6})
     psi_w, _, rho = prep.ball_for(sensor)
@@ -504,10 +506,9 @@ def prediction_errors(prep: Prepared, params: RigParams, phi: FloatArray, phi_do
     return scores.result(horizon, start="smoothed")
 
 
-#: Scale of each state in the start-state fit: theta, phi [rad], theta_dot, phi_dot [rad/s] and
-#: (under creep) the ball's relative spin [rad/s]
-#: (``x_scale`` of the solver; the finite-difference steps are 1e-4 of it).
-_STATE_SCALE = np.array([1e-3, 1e-3, 0.1, 0.1, 1.0])
+#: Scale of each state in the start-state fit (:data:`bfr_diagnose.grip.STATE_SCALE`; the
+#: finite-difference steps are 1e-4 of it).
+_STATE_SCALE = STATE_SCALE
 
 #: Noise below which a measured angle's noise is taken as this [rad] (an exact encoder, a
 #: noise-free simulation): the weights stay finite.
@@ -529,7 +530,8 @@ class _StartFit:
     Attributes
     ----------
     state : ndarray
-        ``[theta, phi, theta_dot, phi_dot]`` at the fit window's first sample.
+        ``[theta, phi, theta_dot, phi_dot]`` at the fit window's first sample, and under
+        creep the ball's relative spin [rad/s] fifth.
     rms : float
         RMS of the noise-normalised residual over the fit window [-].
     """

@@ -99,8 +99,9 @@ def corrected_yaml(d: Diagnosis) -> str:
                          "model cannot slip).")
         elif g.get("verdict") == "slips":
             lines.append(f"{Path(rec['name']).name}: the ball slips "
-                         f"({SlipLaw.of(g['slip_test']).text()}); no model the simulator "
-                         "runs has this law: not written into the parameters.")
+                         f"({SlipLaw.of(g['slip_test']).text()}); ball.creep_time carries it "
+                         "for the rigid model the simulator runs (the median over the "
+                         "recordings that creep).")
     for c in s["confounded"]:
         if c.get("kind") in ("pair", "sensor"):
             lines.append(f"Confounded: {' / '.join(c['effects'])} (only a combination is "
@@ -372,6 +373,20 @@ def _md_grip(d: Diagnosis) -> list[str]:
         L.append(f"| {Path(pr.name).name} | {fd['p50']:.3g} / {fd['p90']:.3g} / "
                  f"{fd['p99']:.3g} / {fd['max']:.3g} | {where} | {mu} | {cells} "
                  f"**{g['verdict']}** |")
+    for pr in d.parts:
+        ee = pr.summary.get("grip", {}).get("equation_error")
+        if ee:
+            frame = (f"; the frame's row {ee['frame_heldout_rolling']:.2f} -> "
+                     f"{ee['frame_heldout_creep']:.2f}" if "frame_heldout_creep" in ee else "")
+            L += ["", f"**{Path(pr.name).name}**, the creep by another method: the equation "
+                  "error (no start, no integration; the spin the lag of the measured rolling "
+                  "rate, docs/diagnosis.md) of the corrected model, the ball's row held out "
+                  f"over its noise, rolling {ee['heldout_rolling']:.2f} -> creeping with "
+                  f"tau_s = {ee['tau_s']:.2g} s {ee['heldout_creep']:.2f} (the selection "
+                  f"with its suspects {ee['heldout_selection']:.2f}){frame}; on the training "
+                  f"samples the ball's row is smallest at tau_s = {ee['tau_s_train']:.2g} s "
+                  f"(rolling {ee['train_rolling']:.3g}, "
+                  + ", ".join(f"{k} s {v:.3g}" for k, v in ee["train"].items()) + ")."]
     return [*L, ""]
 
 

@@ -36,6 +36,21 @@ reported, by the joint fit with the dynamics. The frame-only row (no ball) is
 ``r1 = k' * (J_f th') - k * (Q_theta - G1_f)`` (``G1_f`` the frame's own weight); a
 frame-held recording has rows 2 and 3 only (``th' = th'' = 0``).
 
+A creeping ball (:mod:`bfr_diagnose.grip`, 5: its spin relaxes to rolling over tau_s) has
+its spin as a coordinate of its own, ``J_b omega_b' = tau_f``, and the generalised forces
+``(-tau_f, lam tau_f / R)`` on ``(theta, phi)``; its spin is the first-order lag of the rolling
+rate ``w = th' - lam ph' / R`` (:func:`bfr_diagnose.grip.creep_lag`), a function of the
+measured states. With ``k * (J_b omega_b') = k' * (J_b omega_b)`` and, for ``g = lam / R``,
+``k * (g J_b omega_b') = k' * (g J_b omega_b) - k * (g' J_b omega_b)``, the rows are the
+rolling rows with the spin's momentum ``J_b w`` replaced by ``J_b omega_b``; for the relative
+spin ``s = omega_b - w``:
+
+    r1 += k' * (J_b s)
+    r2 += k' * (-g J_b s) - k * (-g' J_b s),        g' = lam' ph' / R
+
+(rolling's ``dT/dphi`` holds the spin's ``-g' J_b w``, a creeping spin's energy does not
+depend on phi). ``tau_s -> 0`` gives back the rolling rows.
+
 Numerics. The kernel is ``cos^4`` with half-width 0.2 s (see :func:`kernel_pair` for why not
 Hann; shorter for runs too short to hold four of them, :func:`usable_half_width`); the
 model terms are evaluated on every second grid sample (4 ms quadrature nodes, exact to
@@ -65,12 +80,14 @@ from bfr_model.layout import (
     I_CW,
     I_EL,
     I_G,
+    I_JB,
     I_JF,
     I_KU,
     I_M,
     I_MEX,
     I_MEY,
     I_MUR,
+    I_R,
     I_SW,
     I_TAU0,
     I_TC,
@@ -80,6 +97,7 @@ from bfr_model.layout import (
 from bfr_model.params import RigParams
 from numpy.typing import NDArray
 
+from bfr_diagnose.grip import creep_lag
 from bfr_diagnose.preprocess import Prepared, SensorCorrection, segments_from_mask
 
 #: The equation rows by number: the frame's torque balance, the ball's, the ball's distance.
@@ -400,11 +418,13 @@ class ResidualEvaluator:
         return out
 
     def evaluate(self, params: RigParams,
-                 sensor: SensorCorrection | float | None = None) -> Residual:
+                 sensor: SensorCorrection | float | None = None,
+                 creep: float | None = None) -> Residual:
         """Equation error of ``params`` under a camera correction (see module).
 
         ``sensor`` is a :class:`SensorCorrection` (a plain float is read as an extra camera
-        latency [s]).
+        latency [s]). ``creep``: the ball's spin creeps with this relaxation time tau_s [s]
+        (module docstring, a creeping ball); None (default): it rolls.
         """
         if sensor is None or isinstance(sensor, (int, float)):
             sensor = SensorCorrection(latency=float(sensor or 0.0))
@@ -427,7 +447,7 @@ class ResidualEvaluator:
         P = model.P
         key = (_ball_key(P), *model.geom_args[:2],
                *(a.tobytes() for a in model.geom_args[2:]), sensor.latency, sensor.offset_x,
-               sensor.offset_y, sensor.rotation, sensor.scale, sensor.theta_zero)
+               sensor.offset_y, sensor.rotation, sensor.scale, sensor.theta_zero, creep)
         if self._ball_cache is not None and self._ball_cache[0] == key:
             ball = self._ball_cache[1]
         else:
@@ -440,6 +460,8 @@ class ResidualEvaluator:
                 *model.kernel_args)
             if np.all(np.isfinite(phi)):
                 self._last_solution = (psi, phi, dpsi)
+            if creep is not None:
+                p1b, p2, f2 = self._creep_terms(model, creep, phi, phid, p1b, p2, f2)
             r2 = self._conv(self._nodes(p2), self.kd) - self._conv(self._nodes(f2), self.k)
             r3 = self._conv(self._nodes(rho - pr), self.k)
             ball = (self._conv(self._nodes(p1b), self.kd) - self._conv(self._nodes(f1b), self.k),
@@ -461,6 +483,25 @@ class ResidualEvaluator:
             r1 = r1b + inertial - applied
         return Residual(r1, r2, self.idx, grid=self._to_grid, nodes=grid_nodes, n=prep.n,
                         r3=r3)
+
+    def _creep_terms(self, model: RigidModel, tau_s: float, phi: FloatArray,
+                     phid: FloatArray, p1b: FloatArray, p2: FloatArray, f2: FloatArray
+                     ) -> tuple[FloatArray, FloatArray, FloatArray]:
+        """``(p1b, p2, f2)`` at the usable nodes with the spin creeping (module docstring).
+
+        The relative spin is the lag of the rolling rate along the quadrature nodes, each
+        usable stretch of nodes starting rolling.
+        """
+        P = model.P
+        lam, lam1 = curve_terms(phi, *model.kernel_args)[8:10]
+        g = lam / P[I_R]
+        w = self.prep.theta_dot[self._sel] - g * phid
+        ok = np.zeros(self._grid.size, bool)
+        ok[self._sel_s] = np.isfinite(w)
+        h = float(self.prep.t[self._grid[1]] - self.prep.t[0]) if self._grid.size > 1 else 1.0
+        s = creep_lag(self._nodes(np.nan_to_num(w)), ok, h, float(tau_s))[self._sel_s]
+        s = np.nan_to_num(s) * P[I_JB]
+        return p1b + s, p2 - g * s, f2 - lam1 * phid / P[I_R] * s
 
     def _predicted(self, psi: FloatArray) -> FloatArray:
         """Newton's starting contact angles for the ball-centre angles ``psi``.

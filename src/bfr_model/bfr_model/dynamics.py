@@ -69,6 +69,21 @@ Perturbation terms (bfr_model.perturbations; all off by default, exact unless st
 
 With all three the normal force is ``F_n = n3 . m (r_ddot + g_e y)``, ``n3 = W n``, linear in
 both accelerations: ``F_n = f0 + f_th th'' + f_ph ph''``.
+
+A creeping spin (``ball.creep_time`` = tau_s > 0; linear creep at the plate edges, Kalker's
+linear theory, Johnson 1985 ch. 8): the ball does not roll exactly; its spin omega_b is a
+coordinate of its own, driven by the edges' friction torque
+
+    tau_f = -(J_b / tau_s) (omega_b - omega_roll),   omega_roll = th' - lam ph' / R,
+    J_b omega_b' = tau_f,
+
+and the translation is the model above with ``J_b = 0`` plus the friction's generalised
+forces ``(-tau_f, lam tau_f / R)`` on ``(theta, phi)`` (:func:`creep_terms`; ``tau_s -> 0``
+is rolling: ``tau_f`` becomes the rolling constraint's ``J_b omega_roll'``). The friction's
+power ``tau_f (omega_b - omega_roll)`` is never positive and is booked as dissipation; the
+kinetic energy holds ``J_b omega_b^2 / 2`` instead of rolling's. The integrators then carry
+omega_b as a seventh entry (:meth:`RigidModel.state`). The diagnosis's slip test finds this
+law on the real rig (:mod:`bfr_diagnose.grip`, 5), and the same kernel predicts with it.
 """
 
 from __future__ import annotations
@@ -99,6 +114,7 @@ from bfr_model.layout import (
     I_SW,
     I_TAU0,
     I_TC,
+    I_TS,
     I_VC,
     I_VR,
     rigid_vector,
@@ -107,6 +123,7 @@ from bfr_model.params import RigParams
 
 __all__ = [
     "RigidModel",
+    "creep_terms",
     "curve_terms",
     "forced_terms",
     "frame_gravity",
@@ -345,15 +362,49 @@ def forced_terms(theta, phi, theta_dot, phi_dot, u, f1, f2, P, R, rho0, orders, 
 
 
 @njit
+def creep_terms(theta, phi, theta_dot, phi_dot, omega_b, u, inv_tau, jb, Pt, R, rho0, orders,  # noqa: ANN001, ANN201
+                ccos, csin, bphi, bh, bw):  # noqa: ANN001
+    """Accelerations, powers and normal force of a ball whose spin creeps (module docstring).
+
+    ``Pt`` is the parameter vector with ``J_b = 0`` (the translation alone), ``jb`` the
+    ball's J_b [kg m^2], ``inv_tau = 1 / tau_s`` [1/s].
+
+    Returns
+    -------
+    tuple
+        ``(theta_ddot, phi_ddot, omega_b_dot, p_in, p_diss, F_n)``: as :func:`rigid_terms`,
+        the spin's acceleration [rad/s^2] third; ``p_diss`` includes the creep's
+        ``(J_b / tau_s) (omega_b - omega_roll)^2``.
+    """
+    rr = Pt[I_R]
+    lam = curve_terms(phi, Pt, R, rho0, orders, ccos, csin, bphi, bh, bw)[8]
+    s = omega_b - (theta_dot - lam * phi_dot / rr)
+    tau = -jb * inv_tau * s
+    thdd, phdd, p_in, p_diss, fn = forced_terms(theta, phi, theta_dot, phi_dot, u, -tau,
+                                                lam * tau / rr, Pt, R, rho0, orders, ccos,
+                                                csin, bphi, bh, bw)
+    return thdd, phdd, tau / jb, p_in, p_diss - tau * s, fn
+
+
+@njit
 def rigid_rhs(t, x, args):  # noqa: ANN001, ANN201
     """Right-hand side of the 6-state ODE ``[theta, phi, th', ph', W_in, W_diss]``.
 
-    ``args = (u, P, R, rho0, orders, ccos, csin, bphi, bh, bw)`` with u held constant.
+    ``args = (u, P, R, rho0, orders, ccos, csin, bphi, bh, bw)`` with u held constant. A
+    creeping spin (``P[I_TS] > 0``) is a seventh state, omega_b (:func:`creep_terms`); a
+    six-entry x rolls whatever ``P[I_TS]`` says (the kernels that predict rolling).
     """
     u, P, R, rho0, orders, ccos, csin, bphi, bh, bw = args
-    thdd, phdd, p_in, p_diss, _ = rigid_terms(x[0], x[1], x[2], x[3], u, P, R, rho0, orders,
-                                              ccos, csin, bphi, bh, bw)
-    dx = np.empty(6)
+    dx = np.empty(x.shape[0])
+    if P[I_TS] > 0.0 and x.shape[0] > 6:
+        Pt = P.copy()
+        Pt[I_JB] = 0.0
+        thdd, phdd, dx[6], p_in, p_diss, _ = creep_terms(
+            x[0], x[1], x[2], x[3], x[6], u, 1.0 / P[I_TS], P[I_JB], Pt, R, rho0, orders,
+            ccos, csin, bphi, bh, bw)
+    else:
+        thdd, phdd, p_in, p_diss, _ = rigid_terms(x[0], x[1], x[2], x[3], u, P, R, rho0,
+                                                  orders, ccos, csin, bphi, bh, bw)
     dx[0] = x[2]
     dx[1] = x[3]
     dx[2] = thdd
@@ -449,21 +500,48 @@ class RigidModel:
 
     # -- state functions -------------------------------------------------------------------
     def accelerations(self, x: ArrayLike, u: float = 0.0) -> tuple[float, float]:
-        """(theta_ddot, phi_ddot) [rad/s^2] at state x under command u [N m]."""
+        """(theta_ddot, phi_ddot) [rad/s^2] at state x under command u [N m].
+
+        A creeping spin's (seven entries) with its own spin x[6].
+        """
         x = np.asarray(x, float)
-        r = rigid_terms(x[0], x[1], x[2], x[3], float(u), *self.kernel_args)
+        if self.creeps and x.shape[-1] == 7:
+            r = creep_terms(x[0], x[1], x[2], x[3], x[6], float(u), *self._creep_args())
+        else:
+            r = rigid_terms(x[0], x[1], x[2], x[3], float(u), *self.kernel_args)
         return float(r[0]), float(r[1])
 
     def normal_force(self, x: ArrayLike, u: ArrayLike = 0.0) -> FloatArray:
-        """Normal force of the frame on the ball [N] (> 0: the rigid model holds)."""
+        """Normal force of the frame on the ball [N] (> 0: the rigid model holds).
+
+        A creeping spin's (seven entries) with its own spin x[..., 6].
+        """
         x = np.asarray(x, float)
-        return rigid_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3],
-                           np.asarray(u, float) + 0.0 * x[..., 0], *self.kernel_args)[4]
+        u = np.asarray(u, float) + 0.0 * x[..., 0]
+        if self.creeps and x.shape[-1] == 7:
+            return creep_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3], x[..., 6], u,
+                               *self._creep_args())[5]
+        return rigid_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3], u, *self.kernel_args)[4]
+
+    def _creep_args(self) -> tuple:
+        """``(1 / tau_s, J_b, Pt, *geom_args)`` of :func:`creep_terms` (Pt: ``J_b = 0``)."""
+        Pt = self.P.copy()
+        Pt[I_JB] = 0.0
+        return (1.0 / self.P[I_TS], float(self.P[I_JB]), Pt, *self.geom_args)
 
     def energy(self, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
-        """(kinetic, potential) energy [J] of state(s) x, shape (..., 4+)."""
+        """(kinetic, potential) energy [J] of state(s) x, shape (..., 4+).
+
+        A creeping spin's (seven entries): the translation's with ``J_b = 0`` plus
+        ``J_b omega_b^2 / 2``.
+        """
         x = np.asarray(x, float)
-        return energy_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3], *self.kernel_args)
+        if not (self.creeps and x.shape[-1] == 7):
+            return energy_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3], *self.kernel_args)
+        Pt = self._creep_args()[2]
+        kin, pot = energy_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3], Pt,
+                                *self.geom_args)
+        return kin + 0.5 * self.P[I_JB] * x[..., 6] ** 2, pot
 
     def ball_position(self, x: ArrayLike) -> FloatArray:
         """Ball centre in the world frame, shape (..., 2) [m] (x, y; see :meth:`ball_sway`)."""
@@ -486,19 +564,45 @@ class RigidModel:
         return s * g[0], s * g[2] * x[..., 3]
 
     def ball_spin_rate(self, x: ArrayLike) -> FloatArray:
-        """Ball angular velocity in the world, omega_b = theta_dot - lam phi_dot / R [rad/s]."""
+        """Ball angular velocity in the world, omega_b = theta_dot - lam phi_dot / R [rad/s].
+
+        A creeping spin's is its own state (the seventh entry) where x holds it.
+        """
         x = np.asarray(x, float)
+        if self.creeps and x.shape[-1] == 7:
+            return x[..., 6]
         lam = self.curve.speed(x[..., 1])
         return x[..., 2] - lam * x[..., 3] / self.P[I_R]
+
+    @property
+    def creeps(self) -> bool:
+        """Whether the ball's spin creeps (``ball.creep_time`` > 0): a seventh state."""
+        return bool(self.P[I_TS] > 0.0)
+
+    def state(self, x: ArrayLike) -> FloatArray:
+        """The integrators' state from ``[theta, phi, theta_dot, phi_dot]`` (more ignored).
+
+        Six entries, the work integrals ``W_in = W_diss = 0``; a creeping spin's seventh,
+        omega_b, starts rolling (:meth:`ball_spin_rate` of the four).
+        """
+        x4 = np.asarray(x, float)[:4]
+        out = np.zeros(7 if self.creeps else 6)
+        out[:4] = x4
+        if self.creeps:
+            out[6] = float(self.ball_spin_rate(x4))
+        return out
 
     def rhs_args(self, u: float) -> tuple:
         """``args`` tuple of :func:`rigid_rhs` for a held command u [N m]."""
         return (float(u), *self.kernel_args)
 
     def step(self, x: FloatArray, u: float, dt: float, n: int = 1, t0: float = 0.0) -> FloatArray:
-        """Advance the 6-state x by n RK4 steps of dt [s] under a held command u [N m]."""
-        return rigid_rk4_steps(np.asarray(x, float), float(t0), float(dt), int(n),
-                               self.rhs_args(u))
+        """Advance the state x (:meth:`state`) by n RK4 steps of dt [s] under a held u [N m]."""
+        x = np.asarray(x, float)
+        if x.shape[-1] != (7 if self.creeps else 6):
+            raise ValueError(f"state of {x.shape[-1]} entries: this model's has "
+                             f"{7 if self.creeps else 6} (RigidModel.state)")
+        return rigid_rk4_steps(x, float(t0), float(dt), int(n), self.rhs_args(u))
 
 
 def _arc_length_series(curve: OffsetCurve, P: FloatArray, n: int = 8192,

@@ -46,9 +46,10 @@ index           entry [unit]                                 source (rig.yaml)
 ``I_MEX``       frame's first mass moment, x [kg m]          frame.imbalance, _angle
 ``I_MEY``       frame's first mass moment, y [kg m]          (m_f e [sin, cos] theta_e)
 ``I_TAU0``      drive's torque offset tau_0 [N m]            actuator.torque_offset
+``I_TS``        the ball's creep time tau_s [s] (0: rolls)   ball.creep_time
 ==============  ===========================================  ==============================
 
-The last three are rigid-model entries appended after the contact block (so that the contact
+The last four are rigid-model entries appended after the contact block (so that the contact
 block keeps its indices).
 
 With an elliptic ball, ``2 N`` Fourier coefficients of the ball-centre curve's arc length
@@ -69,7 +70,7 @@ __all__ = [
     "I_CL", "I_CT", "I_CV", "I_CW", "I_DAMP", "I_EB0", "I_EL", "I_EXH", "I_G", "I_HFLY",
     "I_JB", "I_JF", "I_K", "I_KT", "I_KU", "I_M", "I_MARGIN", "I_MAXSTEP", "I_MEX", "I_MEY",
     "I_MF", "I_MUD", "I_MUR", "I_MUS", "I_NEXP", "I_NS", "I_PEXP", "I_R", "I_RB", "I_SBAR",
-    "I_SW", "I_TAU0", "I_TC", "I_VC", "I_VR", "I_VREG", "I_ZE", "P_SIZE", "rigid_vector",
+    "I_SW", "I_TAU0", "I_TC", "I_TS", "I_VC", "I_VR", "I_VREG", "I_ZE", "P_SIZE", "rigid_vector",
     "with_contact",
 ]
 
@@ -82,9 +83,9 @@ I_CW, I_SW, I_CL, I_MF, I_EL, I_EB0, I_SBAR, I_NS = range(11, 19)
 I_K, I_NEXP, I_DAMP, I_PEXP, I_MUS, I_MUD, I_KT, I_CT, I_VREG, I_MARGIN, I_MAXSTEP = range(19, 30)
 # contact model, two-edge contact and event-based stepping (issue 16)
 I_RB, I_ZE, I_HFLY, I_EXH = range(30, 34)
-# rigid model, appended: frame imbalance and the drive's torque offset
-I_MEX, I_MEY, I_TAU0 = range(34, 37)
-P_SIZE = 37
+# rigid model, appended: frame imbalance, the drive's torque offset, the ball's creep
+I_MEX, I_MEY, I_TAU0, I_TS = range(34, 38)
+P_SIZE = 38
 
 
 def rigid_vector(params: RigParams) -> FloatArray:
@@ -113,6 +114,7 @@ def rigid_vector(params: RigParams) -> FloatArray:
     P[I_EB0] = params.ball.ellipse_phase if params.ball.ellipticity > 0.0 else 0.0
     P[I_MEX], P[I_MEY] = params.frame.imbalance_moment
     P[I_TAU0] = params.actuator.torque_offset
+    P[I_TS] = params.ball.creep_time
     return P
 
 

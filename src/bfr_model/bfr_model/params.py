@@ -32,6 +32,7 @@ from bfr_model.param_file import (
 )
 
 __all__ = [
+    "MIN_CREEP_TIME",
     "ActuatorParams",
     "BallParams",
     "ContactParams",
@@ -47,6 +48,12 @@ __all__ = [
     "params_from_dict",
     "params_to_ros_yaml",
 ]
+
+
+#: Shortest creep time of the ball's spin [s] (``ball.creep_time``): with it the relative spin
+#: relaxes at up to about 2.6 / tau_s = 520 1/s, 0.52 per 1 ms step of the simulator's RK4
+#: (its stability limit is 2.8).
+MIN_CREEP_TIME = 5e-3
 
 
 @dataclass(frozen=True)
@@ -70,6 +77,12 @@ class BallParams:
     ellipse_phase : float
         [rad] beta at arc length s = 0 of the ball-centre curve, relative to the normal's
         angle (the ball's orientation when the rigid model's arc length starts).
+    creep_time : float
+        tau_s [s], the ball's spin creeps: it relaxes to rolling over this time instead of
+        rolling (linear creep at the plate edges, ``J_b omega_b' = -(J_b / tau_s) (omega_b -
+        omega_roll)``; :mod:`bfr_model.dynamics`). 0: the ball rolls without slipping.
+        Otherwise at least :data:`MIN_CREEP_TIME`: a faster creep is rolling to within the
+        integrators' steps.
     """
 
     mass: float = 3.00e-3
@@ -78,6 +91,7 @@ class BallParams:
     plate_distance: float = 25.5e-3
     ellipticity: float = 0.0
     ellipse_phase: float = 0.0
+    creep_time: float = 0.0
 
     def __post_init__(self) -> None:
         positive("ball.mass", self.mass)
@@ -91,6 +105,10 @@ class BallParams:
         check(self.ellipticity < self.rolling_radius, "ball.ellipticity",
                f"{self.ellipticity} m must stay below the rolling radius")
         finite("ball.ellipse_phase", self.ellipse_phase)
+        nonnegative("ball.creep_time", self.creep_time)
+        check(self.creep_time == 0.0 or self.creep_time >= MIN_CREEP_TIME, "ball.creep_time",
+              f"{self.creep_time} s: 0 (the ball rolls) or at least {MIN_CREEP_TIME} s (a "
+              "faster creep is rolling to within the integrators' steps)")
 
     @property
     def rolling_radius(self) -> float:

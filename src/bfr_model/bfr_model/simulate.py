@@ -145,9 +145,9 @@ def simulate(model: RigidModel, x0: FloatArray, duration: float,
     u = np.array([float(u_of_t(ti)) for ti in t])
     if not np.all(np.isfinite(u)):
         raise ValueError("torque input produced a non-finite value")
-    x = np.empty((n + 1, 6))
-    x[0, :4] = x0
-    x[0, 4:] = 0.0
+    x0 = model.state(x0)  # a creeping spin (ball.creep_time) is a seventh state
+    x = np.empty((n + 1, x0.size))
+    x[0] = x0
     steps = n
     start = time.perf_counter()
     if integrator == "rk4":

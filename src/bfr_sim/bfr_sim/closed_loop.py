@@ -390,7 +390,7 @@ class _Trace:
     def record(self, k: int, t: float, x: FloatArray, cmd: Command) -> None:
         """Store step ``k``: time, true state and the controller's command."""
         self.t[k] = t
-        self.x[k] = x
+        self.x[k] = x[:6]  # a creeping spin's seventh state is not kept
         self.u[k] = cmd.torque
         self.u_unsat[k] = cmd.torque_unsat
         self.mode[k] = MODE_CODES[cmd.mode]
@@ -418,7 +418,11 @@ class _LoopEnd:
 
 
 def _ball_failed(x: FloatArray, cmd: Command, pargs: tuple) -> bool:
-    """The ball stopped, turned back, lifted off, or the controller declared it lost."""
+    """The ball stopped, turned back, lifted off, or the controller declared it lost.
+
+    The lift-off test is rolling's normal force (a creeping spin's differs by its friction's
+    share of the accelerations).
+    """
     return bool(x[3] <= 0.0 or cmd.mode == BALL_LOST
                 or rigid_terms(x[0], x[1], x[2], x[3], cmd.torque, *pargs)[4] <= 0.0)
 
@@ -544,8 +548,7 @@ def run_closed_loop(controller: OrbitalController, plant_params: RigParams, dura
                            plant_dt)
     rng = np.random.default_rng(seed)
     plant = RigidModel(plant_params)
-    x = np.zeros(6)
-    x[:4] = controller.orbit.state(0.0) if x0 is None else np.asarray(x0, float)
+    x = plant.state(controller.orbit.state(0.0) if x0 is None else x0)
     controller.reset()
     camera = _Camera(sensors, plant, rng)
     trace = _Trace(grid.n_steps)

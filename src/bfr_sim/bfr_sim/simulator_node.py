@@ -151,8 +151,7 @@ class RigSimulation:
               f"the initial state must be 4 finite numbers, got {x0}")
         self.params = params
         self.model = RigidModel(params)
-        self.x = np.zeros(6)
-        self.x[:4] = x0
+        self.x = self.model.state(x0)  # a creeping spin (ball.creep_time) is a seventh state
         self.dt = float(time_step)
         self.step_ns = round(self.dt * _NS)
         self.k = 0
@@ -245,16 +244,20 @@ class RigSimulation:
         return (np.array([rx, ry, sw * g[0]]), np.array([vx, vy, sw * g[2] * phd]))
 
     def truth(self) -> TruthSample:
-        """Ground truth now."""
+        """Ground truth now.
+
+        The spin angle is rolling's (the frame angle minus the rolled arc over R); a creeping
+        spin's rate is its own state, its angle still rolling's.
+        """
         x4 = self.x[:4]
         ball, vel = self.ball_kinematics()
-        kin, pot = self.model.energy(x4)
+        kin, pot = self.model.energy(self.x)
         u = self.applied_command()
-        fn = float(self.model.normal_force(x4, u))
+        fn = float(self.model.normal_force(self.x, u))
         spin = float(x4[0]) - self._arc_length(float(x4[1])) / \
             self.params.ball.rolling_radius - self._spin0
-        return TruthSample(self.t_ns, self.x.copy(), ball, vel, spin,
-                           float(self.model.ball_spin_rate(x4)), self.gain * u, float(kin),
+        return TruthSample(self.t_ns, self.x[:6].copy(), ball, vel, spin,
+                           float(self.model.ball_spin_rate(self.x)), self.gain * u, float(kin),
                            float(pot), fn)
 
 
