@@ -38,6 +38,7 @@ from bfr_model.recording import Recording
 from bfr_tools.read import main as read_main
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from mcap.reader import make_reader
 from test_rig_log_parser import body
 
 DATA = Path(os.environ.get("BFR_RIG_DATA", Path(__file__).resolve().parents[1].parent
@@ -363,6 +364,26 @@ def test_bag_cut_at_half_and_ninety_percent_is_said(tmp_path: Path,
         a = check_outcome(code, out, err)[0]
         assert a["exact"] and a["samples_present"] == n
         assert a["samples_used"] + a["dropped"]["truncated"] == n
+
+
+def test_a_cut_inside_a_chunk_is_truncation_wherever_it_falls(tmp_path: Path,
+                                                              sim_bag: tuple[Path, int]) -> None:
+    """A file cut anywhere inside a chunk record is a truncation, not corruption: also a few
+    bytes past the chunk's header, where the reader fails on the short record's fields (a
+    struct error) before it sees the file's end (the record's own declared length decides;
+    a 2 s bag cut at half once landed there and was called corrupt)."""
+    src, _ = sim_bag
+    raw = (src / "sim.mcap").read_bytes()
+    with (src / "sim.mcap").open("rb") as fh:
+        chunks = sorted(c.chunk_start_offset for c in make_reader(fh).get_summary().chunk_indexes)
+    start = chunks[len(chunks) // 2]
+    for k in (1, 5, 9, 12, 40, 2000):
+        cut = tmp_path / f"cut{k}.mcap"
+        cut.write_bytes(raw[:start + k])
+        code, out, err = run_read(str(cut), "--json", "--allow-partial")
+        a = check_outcome(code, out, err)[0]
+        assert set(a["dropped"]) == {"truncated"}, (k, a["dropped"], err)
+        assert "file ends inside a record (truncated)" in err, (k, err)
 
 
 def test_corrupt_chunk_is_skipped_and_counted(tmp_path: Path,

@@ -57,7 +57,7 @@ from mcap.records import (
     Metadata,
     Schema,
 )
-from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.stream_reader import MAGIC_SIZE, StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 from numpy.typing import NDArray
 from rosbags.rosbag2 import Reader
@@ -771,10 +771,31 @@ class _McapWalk:
                                      f"is unknown")
                 return
             self.stopped_at = where
-            self.end_of_file = isinstance(exc, (EndOfFile, EOFError))
+            self.end_of_file = (isinstance(exc, (EndOfFile, EOFError))
+                                or _record_past_end(fh, where, size))
             what = ("file ends inside a record (truncated)" if self.end_of_file
                     else f"{type(exc).__name__}: {exc}")
             self.failures.append(f"truncated or corrupt at byte ~{where} of {size} ({what})")
+
+
+#: An MCAP record's header: an opcode byte and a little-endian uint64 length.
+_RECORD_HEAD = 9
+
+
+def _record_past_end(fh: BinaryIO, where: int, size: int) -> bool:
+    """Whether the record at byte ``where`` declares more bytes than the file holds.
+
+    A file cut inside a record: the reader may fail on the short record's fields (a struct
+    error) before it notices the end of the file, so the record's own header decides
+    (``where`` 0 is the magic's start: the first record follows it).
+    """
+    start = where if where > 0 else MAGIC_SIZE
+    if size - start < _RECORD_HEAD:
+        return True
+    fh.seek(start)
+    head = fh.read(_RECORD_HEAD)
+    length = int.from_bytes(head[1:], "little")
+    return start + _RECORD_HEAD + length > size
 
 
 def _yaml_counts(meta: dict[str, Any] | None) -> dict[str, int] | None:
