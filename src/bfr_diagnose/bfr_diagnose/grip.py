@@ -463,9 +463,7 @@ def slip_parameters(model: RigidModel) -> tuple[FloatArray, FloatArray, float, f
 
     ``Pt`` is the model's parameter vector without the ball's spin inertia (``J_b = 0``).
     """
-    pt = model.P.copy()
-    pt[I_JB] = 0.0
-    return (model.P, pt, float(model.P[I_JB]), model.params.ball.radius,
+    return (model.P, model.translation_vector, float(model.P[I_JB]), model.params.ball.radius,
             float(model.P[I_R]))
 
 
@@ -623,7 +621,8 @@ class SlipLaw:
             return None
         ok = usable & np.isfinite(theta_dot) & np.isfinite(phi) & np.isfinite(phi_dot)
         w = np.full(phi.size, np.nan)
-        w[ok] = theta_dot[ok] - model.curve.speed(phi[ok]) * phi_dot[ok] / model.P[I_R]
+        zero = np.zeros(int(ok.sum()))
+        w[ok] = model.ball_spin_rate(np.stack([zero, phi[ok], theta_dot[ok], phi_dot[ok]], -1))
         return creep_lag(w, ok, dt, self.value)
 
     def text(self) -> str:

@@ -523,11 +523,20 @@ class RigidModel:
                                *self._creep_args())[5]
         return rigid_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3], u, *self.kernel_args)[4]
 
-    def _creep_args(self) -> tuple:
-        """``(1 / tau_s, J_b, Pt, *geom_args)`` of :func:`creep_terms` (Pt: ``J_b = 0``)."""
+    @property
+    def translation_vector(self) -> FloatArray:
+        """The parameter vector without the ball's spin inertia (``J_b = 0``).
+
+        The translation alone, whose spin a creeping or slipping ball carries apart.
+        """
         Pt = self.P.copy()
         Pt[I_JB] = 0.0
-        return (1.0 / self.P[I_TS], float(self.P[I_JB]), Pt, *self.geom_args)
+        return Pt
+
+    def _creep_args(self) -> tuple:
+        """``(1 / tau_s, J_b, Pt, *geom_args)`` of :func:`creep_terms` (Pt: J_b = 0)."""
+        return (1.0 / self.P[I_TS], float(self.P[I_JB]), self.translation_vector,
+                *self.geom_args)
 
     def energy(self, x: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """(kinetic, potential) energy [J] of state(s) x, shape (..., 4+).
@@ -538,9 +547,8 @@ class RigidModel:
         x = np.asarray(x, float)
         if not (self.creeps and x.shape[-1] == 7):
             return energy_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3], *self.kernel_args)
-        Pt = self._creep_args()[2]
-        kin, pot = energy_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3], Pt,
-                                *self.geom_args)
+        kin, pot = energy_terms(x[..., 0], x[..., 1], x[..., 2], x[..., 3],
+                                self.translation_vector, *self.geom_args)
         return kin + 0.5 * self.P[I_JB] * x[..., 6] ** 2, pot
 
     def ball_position(self, x: ArrayLike) -> FloatArray:
