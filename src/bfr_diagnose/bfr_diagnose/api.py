@@ -37,7 +37,7 @@ from bfr_diagnose.effects import (
     sensor_correction,
     sensor_names_for,
 )
-from bfr_diagnose.grip import TAU_GRID, SlipLaw, grip
+from bfr_diagnose.grip import TAU_GRID, SlipLaw, creep_is_contact, grip
 from bfr_diagnose.identify import (
     DISAGREE_Z,
     Part,
@@ -316,8 +316,9 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
                                          "contact.dynamic_friction": mu})
     creeping = [pr.summary["grip"]["slip_test"]["tau_s"] for pr in results
                 if pr.summary["grip"].get("verdict") == "slips"
-                and pr.summary["grip"]["slip_test"]["law"] == "creep"]
-    if creeping:  # a creeping spin: a term of the rigid model (bfr_model.dynamics)
+                and pr.summary["grip"]["slip_test"]["law"] == "creep"
+                and creep_is_contact(pr.summary["grip"]["slip_test"])]
+    if creeping:  # a contact's creep: a term of the rigid model (bfr_model.dynamics)
         corrected = corrected.replace(**{"ball.creep_time": float(np.median(creeping))})
     findings = _summary(recordings=recordings, results=results, opts=opts, sel=sel,
                         null=null, suspects=suspects, between=between, notes=notes,
@@ -499,6 +500,14 @@ def _slip_against_suspects(pr: PartResult, suspects: dict[str, str]) -> list[str
     if not suspects or slip is None or sel is None or not slip < sel:
         return []
     law = SlipLaw.of(pr.summary["grip"]["slip_test"])
+    if law.kind == "creep" and not creep_is_contact(pr.summary["grip"]["slip_test"]):
+        return [f"{pr.name}: the creep (tau_s = {law.value:.2g} s, itself a suspect) and the "
+                f"suspects ({', '.join(suspects)}) both take from the ball's motion some of the "
+                f"spin's inertia a rolling ball of the nominal geometry has (the plausible "
+                f"effects with the creep predict the ball 100 ms ahead to {slip:.3g} rad held "
+                f"out, the selection with its suspects to {sel:.3g}): stand-ins, most likely "
+                "for one thing the model lacks (a larger rolling radius does both: "
+                "docs/diagnosis.md, \"What the creep stands in for\")."]
     return [f"{pr.name}: with the ball's slip ({law.text()}) the plausible effects predict "
             f"the ball 100 ms ahead better than the selection with its suspects "
             f"({', '.join(suspects)}): {slip:.3g} against {sel:.3g} rad held out; a rolling "

@@ -89,15 +89,34 @@ friction coefficient on a plate edge.
    power ``tau_f (omega_b - omega_roll) = -(J_b / tau_s) (omega_b - omega_roll)^2`` is
    never positive.
 
+6. **Is the creep a contact's creep?** (:func:`creep_slip`, nineteenth round). Kalker's
+   linear law holds while the slip is small: a contact's tangential force grows with the
+   creepage ``xi = v_slip / v_roll`` only until it reaches the friction limit, at creepages
+   of ``mu F_n / (G c^2 C11)`` (Johnson 1985, 8.3; ``c`` the Hertz contact's radius, ``G``
+   the shear modulus, ``C11`` about 4): for this ball's normal forces (0.01-0.1 N) about
+   0.06 % for a hard plastic or metal and about 2 % even for a rubber, and beyond it the
+   contact slides at ``mu F_n`` (Coulomb, which the test tries too). So a creep law is a
+   contact's creep only where the slip it implies stays small. Along the recording the
+   law's own spin (:meth:`SlipLaw.spin`, the lag of the measured rolling rate) gives the
+   relative spin ``r``; the ball rolls relative to the frame at ``lam phi_dot / R``, so the
+   slip ratio is ``|r| R / |lam phi_dot|`` (samples whose ball centre moves along the track
+   at least :data:`MIN_TRACK_SPEED`) and the slip speed at the edges ``|r| R``. Where the
+   median slip ratio exceeds :data:`MAX_CREEP_SLIP` (2.5 times a rubber's saturation) the
+   law is a *suspect*: the ball's row then wants less of the spin's inertia at short time
+   scales than a rolling ball has, and a creep that slow stands in for it (a larger rolling
+   radius or a lighter ball fit the same rows; docs/diagnosis.md, "What the creep stands
+   in for"); the report says so and ``corrected_params.yaml`` does not carry it.
+
 Each grid is walked away from rolling (mu down, tau_s up) and stops once the training cost
 has risen after a fall, or twice without one (the costs are unimodal in every case seen).
 
 Coulomb slip is not a term of the rigid model the simulator runs; it is one of the contact
 model (``contact.static_friction`` and ``contact.dynamic_friction``), which the report names;
-creep is one of the rigid model (``ball.creep_time``). The
-diagnosis's predictions carry it (4): where the ball slips, the plausible effects (those
-``corrected_params.yaml`` holds) with the law predict the ball beside the selection's model. The
-test needs a ball on a turning frame; a held frame or a frame alone is not tested.
+creep is one of the rigid model (``ball.creep_time``), written only where it is a contact's
+creep (6). The diagnosis's predictions carry it (4): where the ball slips, the plausible
+effects (those ``corrected_params.yaml`` holds) with the law predict the ball beside the
+selection's model. The test needs a ball on a turning frame; a held frame or a frame alone
+is not tested.
 """
 
 from __future__ import annotations
@@ -125,11 +144,21 @@ from scipy.optimize import least_squares
 
 from bfr_diagnose.preprocess import Prepared, SensorCorrection
 
-__all__ = ["ALPHA", "FLIPS", "MAX_STEP", "MIN_GAIN", "MU_GRID", "STATE_SCALE", "TAU_GRID",
-           "SlipLaw", "coupled_rollout", "creep_lag", "creep_rollout", "grip",
+__all__ = ["ALPHA", "FLIPS", "MAX_CREEP_SLIP", "MAX_STEP", "MIN_GAIN", "MIN_TRACK_SPEED",
+           "MU_GRID", "STATE_SCALE", "TAU_GRID", "SlipLaw", "coupled_rollout",
+           "creep_is_contact", "creep_lag", "creep_rollout", "creep_slip", "grip",
            "slip_parameters"]
 
 FloatArray = NDArray[np.float64]
+
+#: Largest median slip ratio of a creep law taken as a contact's creep [-] (module docstring,
+#: 6): elastic creep saturates at creepages of about 0.06 % (hard plastic, metal) to 2 %
+#: (rubber) at this ball's normal forces; beyond, a contact slides at its friction limit.
+MAX_CREEP_SLIP = 0.05
+
+#: Slowest ball-centre speed along the track whose slip ratio :func:`creep_slip` takes [m/s]
+#: (slower, the ratio divides by nearly nothing).
+MIN_TRACK_SPEED = 0.01
 
 #: Friction coefficients of the ball on a plate edge tried by the slip test [-] (factor 1.5).
 MU_GRID = (0.05, 0.075, 0.11, 0.17, 0.25, 0.38, 0.57)
@@ -844,8 +873,8 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
         training costs, the chosen ``law`` (None, ``"coulomb"`` or ``"creep"``) with its
         ``mu`` [-] or ``tau_s`` [s], held-out RMS of the ball's in-frame angle [rad] rolling
         and slipping and the nominal model's rolling, windows better and worse, the
-        randomisation test's p),
-        ``verdict`` and ``meaning``.
+        randomisation test's p; under creep ``creep_slip``, the slip it implies,
+        :func:`creep_slip`), ``verdict`` and ``meaning``.
     """
     if not prep.has_ball:
         return {"verdict": "not tested",
@@ -927,6 +956,13 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
             f"model can (contact.static_friction = contact.dynamic_friction = "
             f"{law.value:.2g})"))
     elif law is not None and gain >= MIN_GAIN and p < ALPHA:
+        cs = creep_slip(ball.model, law, ball.thd, phi, phi_dot, prep.usable, dt)
+        out["slip_test"]["creep_slip"] = cs
+        coulomb = [k for k in train_cost if laws[k] is not None and laws[k].kind == "coulomb"]
+        best_mu = min(coulomb, key=train_cost.get) if coulomb else None
+        tried = (f"Coulomb's best on the training windows, mu = {best_mu}, costs "
+                 f"{train_cost[best_mu] / train_cost[_key(law)]:.1f}x the creep's"
+                 if best_mu is not None else "no Coulomb coefficient the demand reaches")
         out.update(verdict="slips", meaning=(
             f"the ball slips on the plate edges, its spin lagging its rolling and catching "
             f"up over about {law.value:.2g} s: "
@@ -935,8 +971,9 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
             + (f"better than any Coulomb coefficient on the training windows (rolling "
                f"needs up to {top:.2f})" if grid else
                f"where rolling needs mu <= {top:.2g} (below every Coulomb coefficient "
-               f"tried, {MU_GRID[0]})") + f"; the rigid model runs it with ball.creep_time = "
-            f"{law.value:.2g} s"))
+               f"tried, {MU_GRID[0]})")
+            + (f"; the rigid model runs it with ball.creep_time = {law.value:.2g} s"
+               if cs["plausible"] is not False else _creep_meaning(cs, tried))))
     else:
         tried = "rolling" if law is None else law.text()
         bound = (f"; the data reject mu <= {max(rejected):.2g}" if rejected else "")
@@ -945,6 +982,75 @@ def grip(prep: Prepared, corrected: RigParams, nominal: RigParams, sensor: Senso
             f"{gain:.2f}x ({better} of {better + worse} windows better, p = {p:.1g}); "
             f"rolling needs mu up to {top:.2f}{bound}"))
     return out
+
+
+def creep_slip(model: RigidModel, law: SlipLaw, theta_dot: FloatArray, phi: FloatArray,
+               phi_dot: FloatArray, usable: NDArray[np.bool_], dt: float) -> dict[str, Any]:
+    """The slip a creep law implies along a recording, and whether it is a contact's creep.
+
+    Module docstring, 6: the law's relative spin ``r`` (:meth:`SlipLaw.spin`), the slip
+    ratio ``|r| R / |lam phi_dot|`` over the samples whose ball centre moves along the track
+    at least :data:`MIN_TRACK_SPEED`, and the slip speed ``|r| R`` at the plate edges.
+
+    Parameters
+    ----------
+    model : RigidModel
+        The model (its curve's ``lam`` and rolling radius R).
+    law : SlipLaw
+        A creep law.
+    theta_dot, phi, phi_dot : ndarray
+        Frame rate [rad/s], contact angle [rad] and its rate [rad/s] on the grid.
+    usable : ndarray of bool
+        Grid samples to use.
+    dt : float
+        Grid step [s].
+
+    Returns
+    -------
+    dict
+        ``samples``; ``slip_ratio`` (median, 90th percentile) [-] and ``slip_speed`` (median,
+        90th percentile) [m/s], each a dict ``{"p50", "p90"}``; ``plausible`` (the median
+        ratio at most :data:`MAX_CREEP_SLIP`) and ``limit``.
+    """
+    r = law.spin(model, theta_dot, phi, phi_dot, usable, dt)
+    rr = float(model.P[I_R])
+    ok = np.isfinite(r) if r is not None else np.zeros(phi.size, bool)
+    v = np.full(phi.size, np.nan)
+    v[ok] = np.abs(model.curve.speed(phi[ok]) * phi_dot[ok])
+    take = ok & (v >= MIN_TRACK_SPEED)
+    out: dict[str, Any] = {"samples": int(take.sum()), "limit": MAX_CREEP_SLIP,
+                           "unit": "slip ratio [-], slip speed [m/s]"}
+    if not take.any():
+        return {**out, "plausible": None}
+    ratio = np.abs(r[take]) * rr / v[take]
+    speed = np.abs(r[take]) * rr
+    out["slip_ratio"] = {"p50": float(np.median(ratio)), "p90": float(np.quantile(ratio, 0.9))}
+    out["slip_speed"] = {"p50": float(np.median(speed)), "p90": float(np.quantile(speed, 0.9))}
+    out["plausible"] = bool(out["slip_ratio"]["p50"] <= MAX_CREEP_SLIP)
+    return out
+
+
+def creep_is_contact(slip_test: dict[str, Any]) -> bool:
+    """Whether a slip test's creep is a contact's creep (module docstring, 6).
+
+    True for a creep law whose slip stays within :data:`MAX_CREEP_SLIP` (or was not
+    measured); False for any other law or a creep beyond it (a suspect).
+    """
+    if slip_test.get("law") != "creep":
+        return False
+    return slip_test.get("creep_slip", {}).get("plausible") is not False
+
+
+def _creep_meaning(cs: dict[str, Any], tried: str) -> str:
+    """The verdict's words on a creep whose slip is beyond a contact's creep (docstring, 6)."""
+    sr, sv = cs["slip_ratio"], cs["slip_speed"]
+    return (f"; but that creep is not a contact's creep: the spin lags its rolling by a "
+            f"median {100 * sr['p50']:.0f} % ({100 * sr['p90']:.0f} % at the 90th "
+            f"percentile; slip speeds {sv['p50']:.2g}-{sv['p90']:.2g} m/s at the edges), where "
+            f"a contact's elastic creep saturates below about 2 % and it slides at its friction "
+            f"limit ({tried}): a suspect, standing in for something the rolling model lacks "
+            f"(less of the spin's inertia in the ball's motion: a larger rolling radius or a "
+            f"lighter ball fit the same rows); not written into corrected_params.yaml")
 
 
 def _key(law: SlipLaw) -> str:

@@ -25,7 +25,7 @@ from bfr_model.params import params_to_ros_yaml
 
 from bfr_diagnose.api import Diagnosis, PartResult
 from bfr_diagnose.effects import DESTINATION, EFFECTS, display_values
-from bfr_diagnose.grip import SlipLaw
+from bfr_diagnose.grip import SlipLaw, creep_is_contact
 from bfr_diagnose.locate import phi_dot_misfit_by_place
 from bfr_diagnose.synth import SynthConfig, stabilised_recording
 
@@ -97,11 +97,18 @@ def corrected_yaml(d: Diagnosis) -> str:
                          f"{g['slip_test']['mu']:.3g}); contact.static_friction and "
                          "contact.dynamic_friction carry it for the contact model (the rigid "
                          "model cannot slip).")
-        elif g.get("verdict") == "slips":
+        elif g.get("verdict") == "slips" and creep_is_contact(g["slip_test"]):
             lines.append(f"{Path(rec['name']).name}: the ball slips "
                          f"({SlipLaw.of(g['slip_test']).text()}); ball.creep_time carries it "
                          "for the rigid model the simulator runs (the median over the "
                          "recordings that creep).")
+        elif g.get("verdict") == "slips":
+            sr = g["slip_test"]["creep_slip"]["slip_ratio"]["p50"]
+            lines.append(f"NOT applied (suspect, physically implausible): "
+                         f"{Path(rec['name']).name}: the ball's "
+                         f"{SlipLaw.of(g['slip_test']).text()} (its spin lags rolling by a "
+                         f"median {100 * sr:.0f} %: no contact creeps that far; a stand-in); "
+                         "ball.creep_time stays 0.")
     for c in s["confounded"]:
         if c.get("kind") in ("pair", "sensor"):
             lines.append(f"Confounded: {' / '.join(c['effects'])} (only a combination is "
