@@ -316,7 +316,6 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
                                          "contact.dynamic_friction": mu})
     creeping = [pr.summary["grip"]["slip_test"]["tau_s"] for pr in results
                 if pr.summary["grip"].get("verdict") == "slips"
-                and pr.summary["grip"]["slip_test"]["law"] == "creep"
                 and creep_is_contact(pr.summary["grip"]["slip_test"])]
     if creeping:  # a contact's creep: a term of the rigid model (bfr_model.dynamics)
         corrected = corrected.replace(**{"ball.creep_time": float(np.median(creeping))})

@@ -103,11 +103,9 @@ def corrected_yaml(d: Diagnosis) -> str:
                          "for the rigid model the simulator runs (the median over the "
                          "recordings that creep).")
         elif g.get("verdict") == "slips":
-            sr = g["slip_test"]["creep_slip"]["slip_ratio"]["p50"]
             lines.append(f"NOT applied (suspect, physically implausible): "
                          f"{Path(rec['name']).name}: the ball's "
-                         f"{SlipLaw.of(g['slip_test']).text()} (its spin lags rolling by a "
-                         f"median {100 * sr:.0f} %: no contact creeps that far; a stand-in); "
+                         f"{SlipLaw.of(g['slip_test']).text()} ({_creep_why(g['slip_test'])}); "
                          "ball.creep_time stays 0.")
     for c in s["confounded"]:
         if c.get("kind") in ("pair", "sensor"):
@@ -333,6 +331,15 @@ def _md_fit(d: Diagnosis) -> list[str]:
     return [*L, ""]
 
 
+def _creep_why(slip_test: dict[str, Any]) -> str:
+    """Why a creep is not a contact's creep (:func:`bfr_diagnose.grip.creep_is_contact`)."""
+    cs = slip_test.get("creep_slip", {})
+    if cs.get("plausible") is None:
+        return "its slip could not be measured"
+    return (f"its spin lags rolling by a median {100 * cs['slip_ratio']['p50']:.0f} %: no "
+            "contact creeps that far; a stand-in")
+
+
 def _slip_label(slip_test: dict[str, Any], pred: dict[str, Any]) -> str:
     """The slip law of a prediction's row, and where a creeping spin's start comes from.
 
@@ -377,6 +384,8 @@ def _md_grip(d: Diagnosis) -> list[str]:
                      f"{st['ball_rmse_slipping']:.3g} (x{st['improvement']:.2f}) | "
                      f"{st['windows_better']} / {st['windows_worse']} "
                      f"({st['p_value']:.1g}) |")
+        if st and st.get("law") == "creep" and not creep_is_contact(st):
+            mu += f" (a suspect: {_creep_why(st)})"
         L.append(f"| {Path(pr.name).name} | {fd['p50']:.3g} / {fd['p90']:.3g} / "
                  f"{fd['p99']:.3g} / {fd['max']:.3g} | {where} | {mu} | {cells} "
                  f"**{g['verdict']}** |")
@@ -452,9 +461,15 @@ def _markdown(d: Diagnosis, figs: list[str]) -> str:
                       for pr in d.parts) + ".",
           f"- Noise-only null: {s['null']['source']}.", ""]
     L += _md_physics(d)
-    if s["suspects"]:
+    creeps = [(Path(r["name"]).name, r["grip"]["slip_test"]) for r in s["recordings"]
+              if r.get("grip", {}).get("verdict") == "slips"
+              and r["grip"]["slip_test"].get("law") == "creep"
+              and not creep_is_contact(r["grip"]["slip_test"])]
+    if s["suspects"] or creeps:
         L += ["## Suspects (fitted, physically implausible: not in corrected_params.yaml)", ""]
-        L += [f"- **{n}**: {why}" for n, why in s["suspects"].items()] + [""]
+        L += [f"- **{n}**: {why}" for n, why in s["suspects"].items()]
+        L += [f"- **the ball's creep** ({name}, {SlipLaw.of(st).text()}): {_creep_why(st)} "
+              "(bfr_diagnose.grip, 6)" for name, st in creeps] + [""]
     pairs = [c for c in s["confounded"] if c.get("kind") in ("pair", "sensor")]
     degen = [c for c in s["confounded"] if c.get("kind") == "degenerate"]
     if pairs:
