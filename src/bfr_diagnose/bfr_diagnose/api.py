@@ -37,7 +37,7 @@ from bfr_diagnose.effects import (
     sensor_correction,
     sensor_names_for,
 )
-from bfr_diagnose.grip import TAU_GRID, SlipLaw, creep_is_contact, grip
+from bfr_diagnose.grip import TAU_GRID, SlipLaw, creep_is_contact, creep_is_suspect, grip
 from bfr_diagnose.identify import (
     DISAGREE_Z,
     Part,
@@ -499,7 +499,7 @@ def _slip_against_suspects(pr: PartResult, suspects: dict[str, str]) -> list[str
     if not suspects or slip is None or sel is None or not slip < sel:
         return []
     law = SlipLaw.of(pr.summary["grip"]["slip_test"])
-    if law.kind == "creep" and not creep_is_contact(pr.summary["grip"]["slip_test"]):
+    if creep_is_suspect(pr.summary["grip"]["slip_test"]):
         return [f"{pr.name}: the creep (tau_s = {law.value:.2g} s, itself a suspect) and the "
                 f"suspects ({', '.join(suspects)}) both take from the ball's motion some of the "
                 f"spin's inertia a rolling ball of the nominal geometry has (the plausible "

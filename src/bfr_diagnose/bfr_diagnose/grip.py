@@ -154,8 +154,8 @@ from bfr_diagnose.preprocess import Prepared, SensorCorrection
 
 __all__ = ["ALPHA", "FLIPS", "MAX_CREEP_SLIP", "MAX_STEP", "MIN_GAIN", "MIN_TRACK_SPEED",
            "MU_GRID", "STATE_SCALE", "TAU_GRID", "SlipLaw", "coupled_rollout",
-           "creep_is_contact", "creep_lag", "creep_rollout", "creep_slip", "grip",
-           "slip_parameters"]
+           "creep_is_contact", "creep_is_suspect", "creep_lag", "creep_rollout", "creep_slip",
+           "grip", "slip_parameters"]
 
 FloatArray = NDArray[np.float64]
 
@@ -1023,8 +1023,9 @@ def creep_slip(model: RigidModel, law: SlipLaw, theta_dot: FloatArray, phi: Floa
     r = law.spin(model, theta_dot, phi, phi_dot, usable, dt)
     rr = float(model.P[I_R])
     ok = np.isfinite(r) if r is not None else np.zeros(phi.size, bool)
-    v = np.full(phi.size, np.nan)
-    v[ok] = np.abs(model.curve.speed(phi[ok]) * phi_dot[ok])
+    v = np.full(phi.size, np.nan)  # the ball centre's speed along the track [m/s]
+    x = np.stack([np.zeros(int(ok.sum())), phi[ok], theta_dot[ok], phi_dot[ok]], -1)
+    v[ok] = np.abs(theta_dot[ok] - model.ball_spin_rate(x)) * rr  # lam |phi_dot|
     take = ok & (v >= MIN_TRACK_SPEED)
     out: dict[str, Any] = {"samples": int(take.sum()), "limit": MAX_CREEP_SLIP,
                            "unit": "slip ratio [-], slip speed [m/s]"}
@@ -1047,6 +1048,11 @@ def creep_is_contact(slip_test: dict[str, Any]) -> bool:
     if slip_test.get("law") != "creep":
         return False
     return slip_test.get("creep_slip", {}).get("plausible") is True
+
+
+def creep_is_suspect(slip_test: dict[str, Any]) -> bool:
+    """Whether a slip test chose a creep that is not a contact's creep (a suspect, 6)."""
+    return slip_test.get("law") == "creep" and not creep_is_contact(slip_test)
 
 
 def _creep_meaning(cs: dict[str, Any], tried: str) -> str:

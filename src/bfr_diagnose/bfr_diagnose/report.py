@@ -25,7 +25,7 @@ from bfr_model.params import params_to_ros_yaml
 
 from bfr_diagnose.api import Diagnosis, PartResult
 from bfr_diagnose.effects import DESTINATION, EFFECTS, display_values
-from bfr_diagnose.grip import SlipLaw, creep_is_contact
+from bfr_diagnose.grip import SlipLaw, creep_is_contact, creep_is_suspect
 from bfr_diagnose.locate import phi_dot_misfit_by_place
 from bfr_diagnose.synth import SynthConfig, stabilised_recording
 
@@ -384,7 +384,7 @@ def _md_grip(d: Diagnosis) -> list[str]:
                      f"{st['ball_rmse_slipping']:.3g} (x{st['improvement']:.2f}) | "
                      f"{st['windows_better']} / {st['windows_worse']} "
                      f"({st['p_value']:.1g}) |")
-        if st and st.get("law") == "creep" and not creep_is_contact(st):
+        if st and creep_is_suspect(st):
             mu += f" (a suspect: {_creep_why(st)})"
         L.append(f"| {Path(pr.name).name} | {fd['p50']:.3g} / {fd['p90']:.3g} / "
                  f"{fd['p99']:.3g} / {fd['max']:.3g} | {where} | {mu} | {cells} "
@@ -463,8 +463,7 @@ def _markdown(d: Diagnosis, figs: list[str]) -> str:
     L += _md_physics(d)
     creeps = [(Path(r["name"]).name, r["grip"]["slip_test"]) for r in s["recordings"]
               if r.get("grip", {}).get("verdict") == "slips"
-              and r["grip"]["slip_test"].get("law") == "creep"
-              and not creep_is_contact(r["grip"]["slip_test"])]
+              and creep_is_suspect(r["grip"]["slip_test"])]
     if s["suspects"] or creeps:
         L += ["## Suspects (fitted, physically implausible: not in corrected_params.yaml)", ""]
         L += [f"- **{n}**: {why}" for n, why in s["suspects"].items()]
