@@ -204,6 +204,14 @@ def test_frame_held_run_ball_rows_alone() -> None:
     assert s["effects"] == ["rolling_resistance"], s["effects"]
     mu = next(p["value"] for p in s["parameters"] if p["name"] == "mu_rol")
     assert mu == pytest.approx(1e-2, rel=0.25)
+    # the swing in closed form (bfr_diagnose.held): the truth's contour and ball, so the
+    # nominal model's periods and rest point are the measured ones
+    h = s["recordings"][0]["held_frame"]
+    assert h["measured"]["n_swings"] >= 3
+    assert h["models"]["nominal"]["period_ratio"] == pytest.approx(1.0, abs=0.01)
+    assert h["measured"]["rest_distance"] == pytest.approx(
+        h["models"]["nominal"]["rest_distance"], abs=2e-4)
+    assert any("on the held frame the ball rests" in n for n in s["notes"])
 
 
 @pytest.mark.parametrize(("phi_dot0", "under"), [(0.0, False), (8.0, True)])

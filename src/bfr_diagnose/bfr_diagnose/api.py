@@ -38,6 +38,7 @@ from bfr_diagnose.effects import (
     sensor_names_for,
 )
 from bfr_diagnose.grip import TAU_GRID, SlipLaw, creep_is_contact, creep_is_suspect, grip
+from bfr_diagnose.held import held_frame_check
 from bfr_diagnose.identify import (
     DISAGREE_Z,
     Part,
@@ -473,6 +474,13 @@ def _notes(suspects: dict[str, str], results: list[PartResult],
             out.append(f"{pr.name}: the frame was held (theta did not change): the ball's "
                        "rows alone are analysed (contour, rolling radius, the ball's inertia, "
                        "rolling resistance; nothing of the frame's drive).")
+            held = pr.summary.get("held_frame") or {}
+            if held.get("measured"):
+                out.append(f"{pr.name}: on the held frame {held['meaning']} (closed form, "
+                           "bfr_diagnose.held).")
+            elif held:
+                out.append(f"{pr.name}: the ball's swing on the held frame not measured: "
+                           f"{held['why']}.")
         g = pr.summary.get("grip", {})
         if "under_edge" in g:
             out.append(f"{pr.name}: {g['under_edge']['meaning']}.")
@@ -630,6 +638,12 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
                 f"{ee['heldout_selection']:.2f}), its training rows choose tau_s = "
                 f"{ee['tau_s_train']:.2g} s")
     metrics = _metrics(part, before, after, located, smoothed, causal)
+    held = None
+    if prep.frame_held:  # the ball's swing on the held frame in closed form (bfr_diagnose.held)
+        models = {"nominal": prob.base, "corrected": corrected}
+        if sel.params != corrected:
+            models["selection"] = sel.params  # with its suspects
+        held = held_frame_check(prep, models)
     summary = {"name": part.name, "kind": part.kind, "rows": [ROW_NAMES[r] for r in part.rows],
                "duration": float(prep.t[-1] - prep.t[0]),
                "usable_s": float(np.sum(ev.rows_mask) * opts.prep.dt),
@@ -638,6 +652,8 @@ def _part_result(prob: Problem, i: int, sel: Selection, sensors0: list[np.ndarra
                                  "noise": {k: _f(v) for k, v in prep.noise.items()}},
                "sensor_model_nominal_physics": asdict(s0), "sensor_model": asdict(s1),
                "located": loc, "metrics": metrics, "grip": ball_grip}
+    if held is not None:
+        summary["held_frame"] = held
     return PartResult(name=part.name, kind=part.kind, rows=part.rows, prep=prep, sensor0=s0,
                       sensor=s1, res_raw=res_raw, res_before=res0, res_after=res1,
                       sigma=part.sigma, test_mask=part.test, pred_raw=smoothed["raw"],

@@ -406,6 +406,38 @@ def _md_grip(d: Diagnosis) -> list[str]:
     return [*L, ""]
 
 
+def _md_held(d: Diagnosis) -> list[str]:
+    """The ball's swing on a held frame: measured against each model (bfr_diagnose.held)."""
+    held = [(Path(pr.name).name, pr.summary["held_frame"]) for pr in d.parts
+            if (pr.summary.get("held_frame") or {}).get("measured")]
+    if not held:
+        return []
+    L = ["## The ball on the held frame, in closed form", "",
+         "With the frame held the ball's row is one conservative degree of freedom: where it "
+         "rests (the lowest point of its centre's path), how that path curves there (the "
+         "contour's curvature less the rolling radius) and how long a swing takes (that "
+         "curvature and the spin's share of the ball's energy) are measured from the camera "
+         "alone, and each model predicts them with no fit (bfr_diagnose.held). Positions as "
+         "the camera reports them; periods per swing at the measured amplitude.", "",
+         "| recording | | rest: distance from the shaft [mm] | path radius at rest [mm] | "
+         "period, median [s] | measured / model period (median per swing) |",
+         "|---|---|---|---|---|---|"]
+    for name, h in held:
+        m = h["measured"]
+        per = "" if m["period_median"] is None else f"{m['period_median']:.3g}"
+        L.append(f"| {name} | **measured** ({m['n_swings']} swings) | "
+                 f"{m['rest_distance'] * 1e3:.1f} | {m['path_radius'] * 1e3:.0f} | {per} | |")
+        for label, md in h["models"].items():
+            if "why" in md:
+                L.append(f"| {name} | {label} | {md['why']} | | | |")
+                continue
+            per = "" if md["period_median"] is None else f"{md['period_median']:.3g}"
+            ratio = "" if md.get("period_ratio") is None else f"{md['period_ratio']:.2f}"
+            L.append(f"| {name} | {label} | {md['rest_distance'] * 1e3:.1f} | "
+                     f"{md['path_radius'] * 1e3:.0f} | {per} | {ratio} |")
+    return [*L, ""]
+
+
 def _md_where(d: Diagnosis) -> list[str]:
     L = ["## Where the nominal residual exceeds the noise", ""]
     for pr in d.parts:
@@ -477,7 +509,8 @@ def _markdown(d: Diagnosis, figs: list[str]) -> str:
     if degen:
         L += ["## Degenerate fits (not added)", ""]
         L += [f"- {c['note']}" for c in degen] + [""]
-    L += _md_read(d) + _md_sensors(d) + _md_fit(d) + _md_grip(d) + _md_where(d)
+    L += (_md_read(d) + _md_sensors(d) + _md_fit(d) + _md_grip(d) + _md_held(d)
+          + _md_where(d))
     L += _md_ranking(d)
     L += ["## Figures", ""] + [f"![{f}]({f})" for f in figs] + [""]
     L += ["Files: `corrected_params.yaml` (physics: run it with `bfr simulate --params` or as "
@@ -509,12 +542,48 @@ def _plots(d: Diagnosis, out: Path, progress: Callable[[str], None] | None = Non
             names.append(_plot_residual_phi(plt, pr, out, k))
         names.append(_plot_overlay(plt, pr, out, k))
     names.append(_plot_ranking(plt, d, out))
+    for k, pr in enumerate(d.parts):
+        if (pr.summary.get("held_frame") or {}).get("measured"):
+            names.append(_plot_held(plt, pr, out, k))
     rolling = [pr for pr in d.parts if pr.kind == "rolling"]
     if rolling:
         if progress:
             progress("phi_dot.png: nominal and corrected model in closed loop")
         names.append(_plot_phi_dot(plt, d, rolling[0], out))
     return names
+
+
+def _plot_held(plt: Any, pr: PartResult, out: Path, k: int) -> str:
+    """``held_<k>.png``: the ball on the held frame, measured and as each model predicts it.
+
+    Its swings' periods against their amplitudes, and its centre's path about the rest point.
+    """
+    h = pr.summary["held_frame"]
+    m = h["measured"]
+    fig, (ax, ax2) = plt.subplots(1, 2, figsize=(11, 4))
+    amp = np.array(m["amplitudes"]) * 1e3
+    ax.plot(amp, np.array(m["periods"], float), "ko", label="measured")
+    prep = pr.prep
+    ok = prep.ball_ok & np.isfinite(prep.ball_xy[0])
+    ax2.plot((prep.ball_xy[0][ok] - m["rest_x"]) * 1e3, (prep.ball_xy[1][ok] - m["rest_y"]) * 1e3,
+             "k.", ms=1, label="measured")
+    for label, md in h["models"].items():
+        if "why" in md:
+            continue
+        ax.plot(amp, np.array([np.nan if p is None else p for p in md["periods"]]), "-",
+                label=label)
+        path = md.get("path")
+        if path:
+            ax2.plot(np.array(path["x"]) * 1e3, np.array(path["y"]) * 1e3, "-", label=label)
+    ax.set_xlabel("swing amplitude (centre's horizontal excursion) [mm]")
+    ax.set_ylabel("period [s]")
+    ax.set_title(f"{Path(pr.name).name}: the ball's swings on the held frame")
+    ax.legend(fontsize=8)
+    ax2.set_xlabel("x - rest [mm]")
+    ax2.set_ylabel("y - rest [mm]")
+    ax2.set_title("the centre's path about its rest point")
+    ax2.legend(fontsize=8)
+    return _save(plt, fig, out, f"held_{k}.png")
 
 
 def _rows_of(pr: PartResult) -> list[tuple[str, np.ndarray, np.ndarray, float]]:
