@@ -98,6 +98,8 @@ def test_the_swing_measures_a_concealed_rolling_radius() -> None:
     assert cf["rolling_radius_from_rest"] == pytest.approx(r_true, abs=3e-4)
     lo, hi = cf["rolling_radius_from_spin_share_ci95"]
     assert lo < cf["rolling_radius_from_spin_share"] < hi
+    # both together give the ball's own J_b / m_b (the truth's ball is the seed's)
+    assert cf["inertia_per_mass_from_both"] == pytest.approx(b.inertia / b.mass, rel=0.05)
 
 
 def test_a_flatter_waist_is_seen_in_the_swing() -> None:

@@ -73,7 +73,7 @@ from scipy.signal import find_peaks
 from bfr_diagnose.preprocess import Prepared, segments_from_mask
 
 __all__ = ["HeldSwing", "closed_form", "held_frame_check", "measure_swing", "model_swing",
-           "path_half_width", "waist_period"]
+           "path_half_width", "spin_share", "waist_period"]
 
 FloatArray = NDArray[np.float64]
 
@@ -352,6 +352,12 @@ def _period(ball: _Ball, phi_r: float, right: float, xr: float, amp: float) -> f
     return math.nan if out is None or back is None else out[0] + back[0]
 
 
+def spin_share(params: RigParams) -> float:
+    """[-] The spin's share of a rolling ball's kinetic energy, ``J_b / (m_b R^2)``."""
+    b = params.ball
+    return b.inertia / (b.mass * (b.radius ** 2 - b.plate_distance ** 2 / 4.0))
+
+
 def waist_period(params: RigParams) -> float:
     """[s] The small-swing period (3) in the upper waist of the seed's contour, frame level.
 
@@ -362,8 +368,8 @@ def waist_period(params: RigParams) -> float:
     ball = params.ball
     rr = math.sqrt(ball.radius ** 2 - ball.plate_distance ** 2 / 4.0)
     rho_c = (a - b) ** 2 / (5.0 * b - a)
-    kappa = ball.inertia / (ball.mass * rr ** 2)
-    return 2.0 * math.pi * math.sqrt((rho_c - rr) * (1.0 + kappa) / params.environment.gravity)
+    return 2.0 * math.pi * math.sqrt((rho_c - rr) * (1.0 + spin_share(params))
+                                     / params.environment.gravity)
 
 
 def held_frame_check(prep: Prepared, models: dict[str, RigParams]) -> dict[str, Any]:
@@ -402,6 +408,7 @@ def held_frame_check(prep: Prepared, models: dict[str, RigParams]) -> dict[str, 
             out["models"][label] = {"why": str(exc)}
             continue
         d = _json(pred)
+        d["spin_share"] = spin_share(params)
         ratio = meas.periods / pred.periods
         good = np.isfinite(ratio)
         d["period_ratio"] = float(np.median(ratio[good])) if good.any() else None
@@ -427,7 +434,9 @@ def closed_form(meas: HeldSwing, nominal: RigParams, pred: HeldSwing) -> dict[st
     point alone, ``R_rest = R_nominal + (d_rest - d_rest,nominal)`` (the ball's centre rides R
     above the edge; the contour's height at the rest point and the camera's offset taken as
     nominal). Two estimates resting on different assumptions: where they agree, the rolling
-    radius is measured twice. None with fewer than three swings.
+    radius is measured twice. Taken together (R from the rest point, kappa from the swing)
+    they give the ball's own ``J_b / m_b = kappa R_rest^2`` (a thin shell's is
+    ``2 R_b^2 / 3``). None with fewer than three swings.
     """
     ok = np.isfinite(meas.periods)
     if np.count_nonzero(ok) < 3:
@@ -443,6 +452,8 @@ def closed_form(meas: HeldSwing, nominal: RigParams, pred: HeldSwing) -> dict[st
     ball = nominal.ball
     r_nom = math.sqrt(ball.radius ** 2 - ball.plate_distance ** 2 / 4.0)
     jm = ball.inertia / ball.mass
+    # the ball that fits both: R from the rest point, J_b / m_b = kappa R^2 from the swing
+    r_rest = r_nom + meas.rest_distance - pred.rest_distance
 
     def kappa(t: float) -> float:
         return g * t ** 2 / (4.0 * math.pi ** 2 * meas.path_radius) - 1.0
@@ -452,8 +463,10 @@ def closed_form(meas: HeldSwing, nominal: RigParams, pred: HeldSwing) -> dict[st
     out: dict[str, Any] = {
         "small_swing_period": t0, "small_swing_period_se": se_t0,
         "spin_share": k, "spin_share_ci95": [k_lo, k_hi],
-        "spin_share_nominal": jm / r_nom ** 2, "rolling_radius_nominal": r_nom,
-        "rolling_radius_from_rest": r_nom + meas.rest_distance - pred.rest_distance,
+        "spin_share_nominal": spin_share(nominal), "rolling_radius_nominal": r_nom,
+        "rolling_radius_from_rest": r_rest,
+        "inertia_per_mass_from_both": k * r_rest ** 2,
+        "inertia_per_mass_nominal": jm,
         "rolling_radius_from_spin_share": math.sqrt(jm / k) if k > 0.0 else None,
         "rolling_radius_from_spin_share_ci95": ([math.sqrt(jm / k_hi) if k_hi > 0 else None,
                                                  math.sqrt(jm / k_lo) if k_lo > 0 else None]),

@@ -420,21 +420,38 @@ def _md_held(d: Diagnosis) -> list[str]:
          "alone, and each model predicts them with no fit (bfr_diagnose.held). Positions as "
          "the camera reports them; periods per swing at the measured amplitude.", "",
          "| recording | | rest: distance from the shaft [mm] | path radius at rest [mm] | "
-         "period, median [s] | measured / model period (median per swing) |",
-         "|---|---|---|---|---|---|"]
+         "period, median [s] | measured / model period (median per swing) | spin share "
+         "J_b / (m_b R^2) |",
+         "|---|---|---|---|---|---|---|"]
     for name, h in held:
         m = h["measured"]
         per = "" if m["period_median"] is None else f"{m['period_median']:.3g}"
+        cf = h.get("closed_form") or {}
+        kap = ("" if not cf else f"{cf['spin_share']:.2f} [{cf['spin_share_ci95'][0]:.2f}, "
+               f"{cf['spin_share_ci95'][1]:.2f}] (closed form)")
         L.append(f"| {name} | **measured** ({m['n_swings']} swings) | "
-                 f"{m['rest_distance'] * 1e3:.1f} | {m['path_radius'] * 1e3:.0f} | {per} | |")
+                 f"{m['rest_distance'] * 1e3:.1f} | {m['path_radius'] * 1e3:.0f} | {per} | | "
+                 f"{kap} |")
         for label, md in h["models"].items():
             if "why" in md:
-                L.append(f"| {name} | {label} | {md['why']} | | | |")
+                L.append(f"| {name} | {label} | {md['why']} | | | | |")
                 continue
             per = "" if md["period_median"] is None else f"{md['period_median']:.3g}"
             ratio = "" if md.get("period_ratio") is None else f"{md['period_ratio']:.2f}"
             L.append(f"| {name} | {label} | {md['rest_distance'] * 1e3:.1f} | "
-                     f"{md['path_radius'] * 1e3:.0f} | {per} | {ratio} |")
+                     f"{md['path_radius'] * 1e3:.0f} | {per} | {ratio} | "
+                     f"{md['spin_share']:.2f} |")
+        if cf and cf["rolling_radius_from_spin_share"] is not None:
+            L += ["", f"**{name}**, in closed form: the small swing's period "
+                  f"{cf['small_swing_period']:.3f} +- {cf['small_swing_period_se']:.3f} s and "
+                  f"the path give the spin's share {cf['spin_share']:.2f}; with the nominal "
+                  f"ball's J_b / m_b that is a rolling radius of "
+                  f"{cf['rolling_radius_from_spin_share'] * 1e3:.1f} mm, and the rest point "
+                  f"says {cf['rolling_radius_from_rest'] * 1e3:.1f} mm (nominal "
+                  f"{cf['rolling_radius_nominal'] * 1e3:.1f} mm; the camera's scale and offset "
+                  "taken as calibrated); both together give the ball's J_b / m_b = "
+                  f"{cf['inertia_per_mass_from_both']:.3g} m^2 (nominal "
+                  f"{cf['inertia_per_mass_nominal']:.3g}).", ""]
     return [*L, ""]
 
 
