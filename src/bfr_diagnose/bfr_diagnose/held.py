@@ -355,7 +355,7 @@ def _period(ball: _Ball, phi_r: float, right: float, xr: float, amp: float) -> f
 def spin_share(params: RigParams) -> float:
     """[-] The spin's share of a rolling ball's kinetic energy, ``J_b / (m_b R^2)``."""
     b = params.ball
-    return b.inertia / (b.mass * (b.radius ** 2 - b.plate_distance ** 2 / 4.0))
+    return b.inertia / (b.mass * b.rolling_radius ** 2)
 
 
 def waist_period(params: RigParams) -> float:
@@ -365,8 +365,7 @@ def waist_period(params: RigParams) -> float:
     the closed form of (2) for ``r = a - b cos 2 phi`` (no harmonics, no bump).
     """
     a, b = params.frame.contour.a, params.frame.contour.b
-    ball = params.ball
-    rr = math.sqrt(ball.radius ** 2 - ball.plate_distance ** 2 / 4.0)
+    rr = params.ball.rolling_radius
     rho_c = (a - b) ** 2 / (5.0 * b - a)
     return 2.0 * math.pi * math.sqrt((rho_c - rr) * (1.0 + spin_share(params))
                                      / params.environment.gravity)
@@ -450,7 +449,7 @@ def closed_form(meas: HeldSwing, nominal: RigParams, pred: HeldSwing) -> dict[st
     se_t0 = float(math.sqrt(s2 * np.linalg.inv(X.T @ X)[0, 0]))
     g = nominal.environment.gravity
     ball = nominal.ball
-    r_nom = math.sqrt(ball.radius ** 2 - ball.plate_distance ** 2 / 4.0)
+    r_nom = ball.rolling_radius
     jm = ball.inertia / ball.mass
     # the ball that fits both: R from the rest point, J_b / m_b = kappa R^2 from the swing
     r_rest = r_nom + meas.rest_distance - pred.rest_distance
