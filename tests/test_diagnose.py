@@ -205,10 +205,12 @@ def test_frame_held_run_ball_rows_alone() -> None:
     mu = next(p["value"] for p in s["parameters"] if p["name"] == "mu_rol")
     assert mu == pytest.approx(1e-2, rel=0.25)
     # the swing in closed form (bfr_diagnose.held): the truth's contour and ball, so the
-    # nominal model's periods and rest point are the measured ones
+    # nominal model's periods and rest point are the measured ones (within 2 %: this rolling
+    # resistance takes a sixth of each swing's amplitude, 1.2 % here) and its spin share
     h = s["recordings"][0]["held_frame"]
     assert h["measured"]["n_swings"] >= 3
-    assert h["models"]["nominal"]["period_ratio"] == pytest.approx(1.0, abs=0.01)
+    assert h["models"]["nominal"]["period_ratio"] == pytest.approx(1.0, abs=0.02)
+    assert h["closed_form"]["spin_share"] == pytest.approx(1.617, rel=0.05)
     assert h["measured"]["rest_distance"] == pytest.approx(
         h["models"]["nominal"]["rest_distance"], abs=2e-4)
     assert any("on the held frame the ball rests" in n for n in s["notes"])

@@ -3,6 +3,7 @@ truth, and the real rig's frame-held run."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from pathlib import Path
 
@@ -13,9 +14,11 @@ from bfr_diagnose.held import (
     held_frame_check,
     measure_swing,
     model_swing,
+    spin_share,
     waist_period,
 )
 from bfr_diagnose.preprocess import plan_parts
+from bfr_diagnose.synth import SynthConfig, held_frame_recording
 from bfr_model.contact import IX, IY, ContactModel
 from bfr_model.io.rig_log import read_rig_log
 from bfr_model.params import load_params
@@ -37,12 +40,12 @@ def test_small_swing_period_is_the_closed_form(changes: dict[str, float]) -> Non
     about the line of its contacts), to 1e-4; and the swing slows as it grows (the waist's
     valley widens away from its floor)."""
     p = NOMINAL.replace(**changes)
-    s = model_swing(p, 0.0, np.array([5e-5, 5e-3, 2e-2]), 0.0, 0.08, 5e-3)
-    assert s.rest_x == pytest.approx(0.0, abs=1e-9)  # the level frame's rest: the waist
+    s = model_swing(p, 0.0, np.array([5e-5, 5e-3, 2e-2]), 0.0, 0.08, (-0.01, 0.01))
+    assert s.rest_x == pytest.approx(0.0, abs=1e-7)  # the level frame's rest: the waist
     a, b = p.frame.contour.a, p.frame.contour.b
     rr = math.sqrt(p.ball.radius ** 2 - p.ball.plate_distance ** 2 / 4)
-    assert s.rest_y == pytest.approx(a - b + rr, abs=2e-6)  # the path fit's vertex
-    assert s.path_radius == pytest.approx((a - b) ** 2 / (5 * b - a) - rr, rel=0.05)
+    assert s.rest_y == pytest.approx(a - b + rr, abs=1e-7)
+    assert s.path_radius == pytest.approx((a - b) ** 2 / (5 * b - a) - rr, rel=0.01)
     assert s.periods[0] == pytest.approx(waist_period(p), rel=1e-4)
     assert s.periods[0] < s.periods[1] < s.periods[2]
 
@@ -69,7 +72,7 @@ def test_swings_of_another_model_are_measured_and_predicted() -> None:
     meas = measure_swing(t, x, y, 0.0, noise=5e-5)
     assert meas.periods.size >= 5
     assert np.ptp(meas.amplitudes) > 5e-3  # swings of several sizes (damped)
-    pred = model_swing(p, 0.0, meas.amplitudes, meas.rest_x, meas.rest_y, 0.01)
+    pred = model_swing(p, 0.0, meas.amplitudes, meas.rest_x, meas.rest_y, (-0.03, 0.03))
     assert meas.rest_x == pytest.approx(pred.rest_x, abs=1e-4)
     assert meas.rest_y == pytest.approx(pred.rest_y, abs=1e-4)
     assert meas.path_radius == pytest.approx(pred.path_radius, rel=0.05)
@@ -78,28 +81,65 @@ def test_swings_of_another_model_are_measured_and_predicted() -> None:
 
 def test_the_swing_measures_a_concealed_rolling_radius() -> None:
     """The contact model's ball in a 20 mm groove (rolling radius 13.25 mm, the seed's 10.6)
-    swinging on a held frame, measured against the seed's model: the closed form's two
-    estimates of the rolling radius, from the spin's share (small swing's period and path)
-    and from the rest point, both find the truth's 13.25 mm within 0.3 mm (13.34 and 13.26
-    here), and the spin's share J_b / (m_b R^2) its 1.04 within 5 % (1.03), where the nominal
-    says 1.62."""
+    swinging on a held frame, measured against the seed's model: each swing's period against
+    a frictionless bead's on the measured path gives the spin's share J_b / (m_b R^2) within
+    5 % of the truth's 1.04 (1.06 here: the compliant contact swings about 1 % slower than
+    rolling), where the nominal says 1.62; with the seed's ball that is the truth's rolling
+    radius within 0.3 mm (13.13 mm), and so is the rest point's reading (13.26 mm); both
+    together give the ball's J_b / m_b within 5 %."""
     truth = NOMINAL.replace(**{"ball.plate_distance": 20e-3,
                                "track.rolling_resistance": 3e-3})
     t, x, y = _contact_swing(truth, 0.35, 8.0)
     meas = measure_swing(t, x, y, 0.0)
-    pred = model_swing(NOMINAL, 0.0, meas.amplitudes, meas.rest_x, meas.rest_y, 0.01)
+    pred = model_swing(NOMINAL, 0.0, meas.amplitudes, meas.rest_x, meas.rest_y, (-0.03, 0.03))
     cf = closed_form(meas, NOMINAL, pred)
     b = truth.ball
     r_true = math.sqrt(b.radius ** 2 - b.plate_distance ** 2 / 4)
+    kappa = b.inertia / (b.mass * r_true ** 2)
     assert cf["rolling_radius_nominal"] == pytest.approx(0.0106, abs=1e-4)
-    assert cf["spin_share"] == pytest.approx(b.inertia / (b.mass * r_true ** 2), rel=0.05)
+    assert cf["spin_share"] == pytest.approx(kappa, rel=0.05)
+    np.testing.assert_allclose(cf["spin_share_per_swing"], kappa, rtol=0.05)
     assert cf["spin_share_nominal"] == pytest.approx(1.62, abs=0.01)
     assert cf["rolling_radius_from_spin_share"] == pytest.approx(r_true, abs=3e-4)
     assert cf["rolling_radius_from_rest"] == pytest.approx(r_true, abs=3e-4)
-    lo, hi = cf["rolling_radius_from_spin_share_ci95"]
-    assert lo < cf["rolling_radius_from_spin_share"] < hi
     # both together give the ball's own J_b / m_b (the truth's ball is the seed's)
     assert cf["inertia_per_mass_from_both"] == pytest.approx(b.inertia / b.mass, rel=0.05)
+
+
+@pytest.mark.parametrize(("theta", "phi0", "tol"), [(0.1, 0.25, 0.05), (0.0, 0.1, 0.08)])
+def test_a_tilted_frame_and_small_swings(theta: float, phi0: float, tol: float) -> None:
+    """A frame held tilted (0.1 rad: the valley is lopsided, its swings asymmetric) and small
+    swings (7 mm: a short path under the camera's noise), through the reader and the
+    preprocessing (a rig log at 165 fixes per second): the model that made the recording
+    predicts every swing's period within 1 %, its rest within 0.2 mm along the valley's
+    floor and 0.05 mm in height, its path radius within 5 %, and the swing's spin share is
+    its 1.62 within 5 % (1.63 tilted), or 8 % for the small swings (1.71: the short path's
+    curvature under the noise, 2 % off, enters the bead's period)."""
+    plant = NOMINAL.replace(**{"track.rolling_resistance": 5e-3})
+    rec = held_frame_recording(plant, SynthConfig(duration=8.0, camera_rate=165.0),
+                               np.random.default_rng(3), theta=theta, phi0=phi0)
+    parts, _ = plan_parts([rec])
+    h = held_frame_check(parts[0][2], {"nominal": plant})
+    m, d = h["measured"], h["models"]["nominal"]
+    assert m["n_swings"] >= 4
+    np.testing.assert_allclose(m["periods"], d["periods"], rtol=0.01)
+    # along the valley's flat floor the rest is found to 0.2 mm, its height to 0.05 mm
+    assert m["rest_x"] == pytest.approx(d["rest_x"], abs=2e-4)
+    assert m["rest_y"] == pytest.approx(d["rest_y"], abs=5e-5)
+    assert m["path_radius"] == pytest.approx(d["path_radius"], rel=0.05)
+    assert h["closed_form"]["spin_share"] == pytest.approx(spin_share(plant), rel=tol)
+
+
+def test_several_held_angles_are_refused() -> None:
+    """Two frame-held runs at different angles in one part: one path needs one angle, so
+    the swing is not measured, and the reason says so."""
+    rec = held_frame_recording(NOMINAL, SynthConfig(duration=4.0, camera_rate=165.0),
+                               np.random.default_rng(3), theta=0.0, phi0=0.2)
+    parts, _ = plan_parts([rec])
+    prep = parts[0][2]
+    tilted = dataclasses.replace(prep, theta=prep.theta + np.linspace(0.0, 0.01, prep.n))
+    h = held_frame_check(tilted, {"nominal": NOMINAL})
+    assert h["measured"] is None and "several angles" in h["why"]
 
 
 def test_a_flatter_waist_is_seen_in_the_swing() -> None:
@@ -110,7 +150,7 @@ def test_a_flatter_waist_is_seen_in_the_swing() -> None:
     truth = NOMINAL.replace(**{"frame.contour.b": 0.036})
     t, x, y = _contact_swing(truth, 0.3, 4.0)
     meas = measure_swing(t, x, y, 0.0)
-    pred = model_swing(NOMINAL, 0.0, meas.amplitudes, meas.rest_x, meas.rest_y, 0.01)
+    pred = model_swing(NOMINAL, 0.0, meas.amplitudes, meas.rest_x, meas.rest_y, (-0.03, 0.03))
     assert np.all(meas.periods > 1.1 * pred.periods)
     assert meas.path_radius > 1.3 * pred.path_radius
 
@@ -126,11 +166,11 @@ def test_too_little_motion_is_refused_with_its_reason() -> None:
 def test_the_rigs_held_run_swings_slower_than_the_seeds_waist() -> None:
     """The NTNU frame-held run (rolling_data): the ball rests 84-86 mm from the shaft (the
     seed's contour and ball: 80.1 mm), its centre's path curves with a radius of 130-200 mm
-    (the seed's: 47 mm over the same width) and it swings in 1.1-1.3 s where the seed's
-    model swings it 1.4-1.65 times faster at the same amplitudes: the rig's waist is flatter
-    than ``a - b cos 2 phi``; and in closed form the ball's spin carries about half the
-    seed's share, a rolling radius near 15.5 mm by two estimates that agree (docs/
-    diagnosis.md, "The ball on the held frame")."""
+    at rest (the seed's: 43 mm) and it swings in 1.1-1.3 s where the seed's model swings it
+    1.4-1.65 times faster at the same amplitudes: the rig's waist is flatter than ``a - b cos
+    2 phi``. Its swings against a bead's on the measured path give a spin share of about
+    1.2 (1.0-1.45, each swing 0.9-1.5), below the seed's 1.62: with the seed's ball a
+    rolling radius of 11.5-13.5 mm (docs/diagnosis.md, "The ball on the held frame")."""
     runs = read_rig_log(DATA / "rolling_data.txt", run=None, warn=False)
     runs = runs if isinstance(runs, list) else [runs]
     parts, _ = plan_parts(runs)
@@ -141,13 +181,12 @@ def test_the_rigs_held_run_swings_slower_than_the_seeds_waist() -> None:
     assert m["n_swings"] >= 8
     assert 0.084 < m["rest_distance"] < 0.086
     assert nom["rest_distance"] == pytest.approx(0.0801, abs=2e-4)
-    assert 0.13 < m["path_radius"] < 0.20 and nom["path_radius"] < 0.06
+    assert 0.13 < m["path_radius"] < 0.20 and nom["path_radius"] < 0.05
     assert 1.1 < m["period_median"] < 1.3
     assert 1.4 < nom["period_ratio"] < 1.65
-    # the closed form: the spin's share about half the seed's, and the two estimates of the
-    # rolling radius agree with each other and not with the seed's 10.6 mm
     cf = h["closed_form"]
-    assert 0.6 < cf["spin_share"] < 1.0 and cf["spin_share_nominal"] > 1.6
-    r_spin, r_rest = cf["rolling_radius_from_spin_share"], cf["rolling_radius_from_rest"]
-    assert 0.0145 < r_spin < 0.0165 and 0.0145 < r_rest < 0.0165
-    assert abs(r_spin - r_rest) < 1e-3
+    assert 1.0 < cf["spin_share"] < 1.45 and cf["spin_share_ci95"][1] < 1.5
+    assert np.all((np.array(cf["spin_share_per_swing"]) > 0.9)
+                  & (np.array(cf["spin_share_per_swing"]) < 1.5))
+    assert cf["spin_share_nominal"] == pytest.approx(1.62, abs=0.01)
+    assert 0.0115 < cf["rolling_radius_from_spin_share"] < 0.0135

@@ -9,8 +9,9 @@ conservative degree of freedom:
     m22(phi) phi'' + (1/2) m22'(phi) phi'^2 + G2(theta_0, phi) = 0                    (1)
 
 (``C`` of :meth:`~bfr_model.dynamics.RigidModel.coriolis_matrix` at ``theta_dot = 0``;
-rolling resistance and creep are left out: they damp the swing and hardly move its
-period). Its rest points are the roots of ``G2`` with ``dG2/dphi > 0``; there the ball's
+rolling resistance is left out: it damps the swing and hardly moves its period. A creeping
+spin is left out too: it is not rolling's, and a swing measures the spin share the ball
+shows). Its rest points are the roots of ``G2`` with ``dG2/dphi > 0``; there the ball's
 centre is at the lowest point of its path (the potential is ``m_b g y_c``), and small
 swings about it have
 
@@ -22,37 +23,45 @@ upper waist, (2) is, in closed form (an independent derivation, tested against (
     omega_0^2 = g / ((rho_c - R) (1 + J_b / (m_b R^2))),    rho_c = (a - b)^2 / (5 b - a)  (3)
 
 ``rho_c`` the waist's radius of curvature (concave where ``5 b > a``), ``rho_c - R`` that of
-the ball centre's path, ``J_b / (m_b R^2)`` the spin's share of the ball's kinetic energy
-(the ball rolls about the line through its two contacts, its centre R from it).
+the ball centre's path, ``kappa = J_b / (m_b R^2)`` the spin's share of the ball's kinetic
+energy (the ball rolls about the line through its two contacts, its centre R from it: its
+kinetic energy is ``m_b v_c^2 (1 + kappa) / 2`` on any path).
 
-So a held frame measures, with no torque, drive or controller in the way, three things the
-closed-loop runs see only mixed: where the ball rests (the contour's height there and R),
-how its path curves there (the contour's curvature, less R) and its period (that curvature
-and the spin's share together).
+So on any path a rolling ball swings like a frictionless bead on its centre's path, slowed
+by ``sqrt(1 + kappa)`` at every amplitude:
+
+    T_ball(E) = sqrt(1 + kappa) T_bead(E)                                               (4)
+
+(``E`` the swing's height above the rest point). A held frame thus measures, with no torque,
+drive, controller or fit in the way: where the ball rests, how its centre's path runs (the
+contour less R), and, from each swing's period against the bead's on the measured path, the
+spin's share.
 
 **Measured** (:func:`measure_swing`), from the camera's ball centre ``(x, y)`` on the held
 part as the camera reports it (world frame, shaft at the origin, y up):
 
-(a) *path*: ``y = p0 + p1 x + p2 x^2`` by least squares over the samples whose ``|x - x_m|``
-    is within half the 95th percentile of the excursion (``x_m`` the median x;
-    :func:`path_half_width`): the rest point is its lowest point (``x_r = -p1 / (2 p2)``)
-    and its radius of curvature there ``1 / (2 p2)`` (a mean curvature over that width: a
-    path that is not a circle has no one radius);
+(a) *path*: ``y = p(x)``, a polynomial of degree 2 to :data:`PATH_DEGREE` (by BIC) fitted
+    by least squares to every sample; the rest point is its lowest point over the samples'
+    range, the path's radius of curvature there ``1 / p''(x_r)``;
 (b) *swings*: a swing runs from one upward zero crossing of ``x - x_r`` to the next (the
     crossings linearly interpolated: there the centre moves fastest, so a camera's noise
     moves them least), over one maximum and one minimum; its period the time between the
-    crossings, its amplitude half the peak-to-peak excursion of x over it. (A camera offset
-    moves ``x_r``, and with it the up and down crossings in opposite directions: the
-    up-to-up time is unchanged to first order.)
+    crossings, its amplitude half the peak-to-peak excursion of x over it, its height ``E``
+    the mean of the path's heights above the rest point at its three extremes;
+(c) *spin share* (:func:`closed_form`): per swing ``kappa_i = (T_i / T_bead(E_i))^2 - 1``
+    by (4), ``T_bead`` the bead's period at ``E_i`` on ``p`` (integrated, no small-swing
+    extrapolation); their mean and a t interval over the swings.
 
-**Predicted** (:func:`model_swing`), by the same two steps on the model: (a) the same fit on
-the model's centre path over the same x range about its own rest point; (b) (1) integrated
-(``solve_ivp``, DOP853, ``rtol`` 1e-10) from rest at the turning point whose centre is the
-swing's amplitude right of the model's rest point, the period the time to the second
-turning point (the swing out and back, exact for a potential that is not symmetric).
-Amplitudes are compared as horizontal excursions of the centre from each one's own rest
-point (a camera offset does not enter; a camera scale enters the amplitude, to which the
-period is only weakly sensitive).
+**Predicted** (:func:`model_swing`), the same on the model: its stable rest point (positive
+normal force) nearest the measured one; the radius of its centre's path there (the
+parametric curve's, exact); each swing released from rest at the turning point right of the rest
+point whose swing has the measured amplitude (half peak-to-peak: the turning point left of
+rest at the same height), integrated by (1) (``solve_ivp``, DOP853, ``rtol`` 1e-10) out and
+back; NaN where the swing would pass a crest of the valley.
+
+What it rests on: the camera's scale (a scale s multiplies the path's lengths, so ``1 +
+kappa`` by ``1 / s``); for the rolling radius from the rest point, the camera's offset and the
+contour's height at the rest point (:func:`closed_form`).
 """
 
 from __future__ import annotations
@@ -65,15 +74,17 @@ from typing import Any
 import numpy as np
 from bfr_model.dynamics import RigidModel, curve_terms, gravity_from_curve, mass_terms
 from bfr_model.params import RigParams
+from numpy.polynomial import Polynomial
 from numpy.typing import NDArray
+from scipy import stats
 from scipy.integrate import solve_ivp
 from scipy.optimize import brentq
 from scipy.signal import find_peaks
 
 from bfr_diagnose.preprocess import Prepared, segments_from_mask
 
-__all__ = ["HeldSwing", "closed_form", "held_frame_check", "measure_swing", "model_swing",
-           "path_half_width", "spin_share", "waist_period"]
+__all__ = ["HeldSwing", "bead_period", "closed_form", "held_frame_check", "measure_swing",
+           "model_swing", "spin_share", "waist_period"]
 
 FloatArray = NDArray[np.float64]
 
@@ -82,9 +93,15 @@ FloatArray = NDArray[np.float64]
 MIN_PROMINENCE = 2e-4
 #: [m] Smallest excursion of the centre (peak to peak in x) whose path is fitted.
 MIN_EXCURSION = 2e-3
+#: Degree of the polynomial path ``y = p(x)``.
+PATH_DEGREE = 6
+#: [rad] Largest spread of the held frame's angle over the part (one path needs one angle).
+MAX_THETA_SPREAD = 2e-3
+#: [m] Largest distance of a model's rest point from the measured one.
+MAX_REST_OFFSET = 0.02
 #: The most swings timed (spread over their amplitudes): each model integrates each one.
 MAX_SWINGS = 12
-#: [s] The longest swing the model's integration follows (twice: out and back).
+#: [s] The longest half swing the integrations follow.
 MAX_PERIOD = 20.0
 
 
@@ -101,14 +118,15 @@ class HeldSwing:
     path_radius : float
         [m] The radius of curvature of the centre's path at the rest point.
     amplitudes : ndarray
-        [m] Each swing's amplitude (horizontal excursion of the centre from the rest point).
+        [m] Each swing's amplitude (half its peak-to-peak horizontal excursion).
     periods : ndarray
         [s] Each swing's period (NaN where the model's ball does not come back).
+    heights : ndarray
+        [m] Each swing's height above the rest point (measured; empty for a model).
     times : ndarray
         [s] Each swing's start (measured; empty for a model).
-    path_x, path_y : ndarray
-        [m] The centre's path relative to the rest point (a model's, over the measured
-        excursion; empty for a measurement, whose samples are the path).
+    path : Polynomial or None
+        ``y(x)`` of the centre's path (world frame).
     """
 
     theta: float
@@ -117,9 +135,9 @@ class HeldSwing:
     path_radius: float
     amplitudes: FloatArray = field(default_factory=lambda: np.zeros(0))
     periods: FloatArray = field(default_factory=lambda: np.zeros(0))
+    heights: FloatArray = field(default_factory=lambda: np.zeros(0))
     times: FloatArray = field(default_factory=lambda: np.zeros(0))
-    path_x: FloatArray = field(default_factory=lambda: np.zeros(0))
-    path_y: FloatArray = field(default_factory=lambda: np.zeros(0))
+    path: Polynomial | None = None
 
     @property
     def rest_distance(self) -> float:
@@ -127,18 +145,32 @@ class HeldSwing:
         return float(math.hypot(self.rest_x, self.rest_y))
 
 
-def _path_fit(x: FloatArray, y: FloatArray, half_width: float, x_m: float
-              ) -> tuple[float, float, float]:
-    """(rest_x, rest_y, path_radius) of ``y = p0 + p1 x + p2 x^2`` within ``half_width``."""
-    sel = np.abs(x - x_m) <= half_width
-    if np.count_nonzero(sel) < 5:
-        raise ValueError("too few samples about the rest point")
-    xs = x[sel] - x_m
-    p2, p1, p0 = np.polyfit(xs, y[sel], 2)
-    if p2 <= 0.0:
-        raise ValueError("the path does not curve upwards: no rest point")
-    xr = -p1 / (2.0 * p2)
-    return float(x_m + xr), float(p0 + p1 * xr + p2 * xr ** 2), float(1.0 / (2.0 * p2))
+def _path(x: FloatArray, y: FloatArray) -> tuple[Polynomial, float, float, float]:
+    """The path ``y = p(x)`` and its rest point and radius: ``(p, x_r, y_r, radius)``.
+
+    The degree (2 to :data:`PATH_DEGREE`) by the Bayesian information criterion: a short
+    noisy path is not given the terms only its noise supports.
+    """
+    best = None
+    for deg in range(2, PATH_DEGREE + 1):
+        q = Polynomial.fit(x, y, deg)
+        rss = float(np.sum((q(x) - y) ** 2))
+        bic = x.size * math.log(max(rss, 1e-300) / x.size) + (deg + 1) * math.log(x.size)
+        if best is None or bic < best[0]:
+            best = (bic, q)
+    p = best[1]
+    lo, hi = float(np.min(x)), float(np.max(x))
+    grid = np.linspace(lo, hi, 2001)
+    k = int(np.argmin(p(grid)))
+    if k in (0, grid.size - 1):
+        raise ValueError("the path has no lowest point inside the samples: no rest point")
+    d = p.deriv()
+    xr = float(brentq(d, grid[k - 1], grid[k + 1], xtol=1e-12)) if d(grid[k - 1]) * d(
+        grid[k + 1]) < 0.0 else float(grid[k])
+    curv = float(p.deriv(2)(xr))
+    if curv <= 0.0:
+        raise ValueError("the path does not curve upwards at its lowest point")
+    return p, xr, float(p(xr)), 1.0 / curv
 
 
 def _up_crossing(t: FloatArray, v: FloatArray, i: int, j: int) -> float | None:
@@ -150,45 +182,33 @@ def _up_crossing(t: FloatArray, v: FloatArray, i: int, j: int) -> float | None:
     return float(t[k] - v[k] * (t[k + 1] - t[k]) / (v[k + 1] - v[k]))
 
 
-def _swings(t: FloatArray, v: FloatArray, prominence: float
-            ) -> tuple[list[float], list[float], list[float]]:
-    """(start times, amplitudes, periods) of the swings of ``v`` (one segment).
+def _swings(t: FloatArray, v: FloatArray, prominence: float) -> list[tuple[float, ...]]:
+    """``(start, period, right, left, right')`` of each swing of ``v`` (one segment).
 
-    A swing runs from one upward zero crossing to the next, over one minimum and one maximum
+    A swing runs from one upward zero crossing to the next, over one maximum and one minimum
     of at least ``prominence`` (the crossings, where the centre moves fastest, time it far
-    better than its turning points do).
+    better than its turning points do); ``right``, ``left``, ``right'`` its extremes: the
+    maxima before and after it and its minimum.
     """
     hi, _ = find_peaks(v, prominence=prominence)
     lo, _ = find_peaks(-v, prominence=prominence)
     ext = sorted([(int(i), 1) for i in hi if v[i] > 0.0] + [(int(i), -1) for i in lo
                                                             if v[i] < 0.0])
     # upward crossings between a minimum and the maximum right after it
-    ups: list[tuple[float, int, int]] = []
+    ups: list[tuple[float, int]] = []
     for (i, si), (j, sj) in itertools.pairwise(ext):
         if si < 0 < sj:
             c = _up_crossing(t, v, i, j)
             if c is not None:
-                ups.append((c, i, j))
-    starts, amps, pers = [], [], []
-    for (c0, _, x0), (c1, m1, _) in itertools.pairwise(ups):
-        inside = [e for e in ext if x0 <= e[0] <= m1]
-        if [sg for _, sg in inside] != [1, -1]:
-            continue  # not one maximum and one minimum between the two crossings
-        starts.append(c0)
-        amps.append(0.5 * (float(v[inside[0][0]]) - float(v[inside[1][0]])))
-        pers.append(c1 - c0)
-    return starts, amps, pers
-
-
-def path_half_width(x: FloatArray) -> float:
-    """[m] The half width of the path fit: half the 95th percentile of ``|x - median(x)|``.
-
-    Set by the swings, not by the samples at rest (a ball that settles puts most of its
-    samples at the rest point, where the path's curvature is not seen); at least half of
-    :data:`MIN_EXCURSION`.
-    """
-    return max(0.5 * float(np.percentile(np.abs(x - np.median(x)), 95.0)),
-               0.5 * MIN_EXCURSION)
+                ups.append((c, j))
+    out = []
+    for (c0, peak0), (c1, peak1) in itertools.pairwise(ups):
+        inside = [e for e in ext if peak0 <= e[0] <= peak1]
+        if [sg for _, sg in inside] != [1, -1, 1]:
+            continue  # not one maximum, one minimum, one maximum
+        out.append((c0, c1 - c0, float(v[inside[0][0]]), float(v[inside[1][0]]),
+                    float(v[inside[2][0]])))
+    return out
 
 
 def measure_swing(t: FloatArray, x: FloatArray, y: FloatArray, theta: float,
@@ -210,28 +230,28 @@ def measure_swing(t: FloatArray, x: FloatArray, y: FloatArray, theta: float,
     Raises
     ------
     ValueError
-        The centre did not move enough (:data:`MIN_EXCURSION`) or its path does not curve up.
+        The centre did not move enough (:data:`MIN_EXCURSION`) or its path has no lowest
+        point that curves up.
     """
     ok = np.isfinite(x) & np.isfinite(y)
     if np.count_nonzero(ok) < 20:
         raise ValueError("fewer than 20 ball positions")
     xo, yo = x[ok], y[ok]
-    x_m = float(np.median(xo))
     if float(np.ptp(xo)) < MIN_EXCURSION:
         raise ValueError(f"the ball's centre moved {np.ptp(xo) * 1e3:.2f} mm: too little to "
                          "see its path")
-    rest_x, rest_y, radius = _path_fit(xo, yo, path_half_width(xo), x_m)
+    p, rest_x, rest_y, radius = _path(xo, yo)
     prom = max(20.0 * noise, MIN_PROMINENCE)
-    starts, amps, pers = [], [], []
+    swings = []
     for i, j in segments_from_mask(ok):
-        s, a, p = _swings(t[i:j], x[i:j] - rest_x, prom)
-        starts += s
-        amps += a
-        pers += p
-    keep = _spread(np.asarray(amps, float), MAX_SWINGS)
+        swings += _swings(t[i:j], x[i:j] - rest_x, prom)
+    s = np.array(swings, float).reshape(-1, 5)
+    amps = 0.5 * (0.5 * (s[:, 2] + s[:, 4]) - s[:, 3])
+    heights = np.mean(p(rest_x + s[:, 2:5]), axis=1) - rest_y
+    keep = _spread(amps, MAX_SWINGS)
     return HeldSwing(theta=float(theta), rest_x=rest_x, rest_y=rest_y, path_radius=radius,
-                     amplitudes=np.asarray(amps, float)[keep],
-                     periods=np.asarray(pers, float)[keep], times=np.asarray(starts, float)[keep])
+                     amplitudes=amps[keep], periods=s[keep, 1], heights=heights[keep],
+                     times=s[keep, 0], path=p)
 
 
 def _spread(amps: FloatArray, n: int) -> NDArray[np.intp]:
@@ -240,6 +260,74 @@ def _spread(amps: FloatArray, n: int) -> NDArray[np.intp]:
         return np.arange(amps.size)
     order = np.argsort(amps)
     return np.sort(order[np.round(np.linspace(0, amps.size - 1, n)).astype(int)])
+
+
+def _turn(direction: float, sign: float = 1.0) -> Any:
+    """A terminal event: ``sign`` times the rate crossing zero in ``direction``."""
+    def ev(_t: float, s: FloatArray) -> float:
+        return sign * float(s[1])
+
+    ev.terminal = True  # type: ignore[attr-defined]
+    ev.direction = direction  # type: ignore[attr-defined]
+    return ev
+
+
+def _out_and_back(rhs: Any, start: FloatArray, sign: float) -> float:
+    """The period of a swing released from rest at ``start``; NaN if it does not come back.
+
+    Out to the other turning point and back (``sign``: +1 when the coordinate first
+    decreases), each half at most :data:`MAX_PERIOD`.
+    """
+    t = 0.0
+    state = start
+    for direction in (1.0, -1.0):
+        sol = solve_ivp(rhs, (0.0, MAX_PERIOD), state, method="DOP853", rtol=1e-10,
+                        atol=1e-12, events=_turn(direction, sign))
+        if not sol.t_events[0].size:
+            return math.nan
+        t += float(sol.t_events[0][0])
+        state = sol.y_events[0][0]
+    return t
+
+
+def _other_side(f: Any, h: float, start: float, step: float, limit: float) -> float | None:
+    """Where the height ``f`` first rises to ``h``, walking from ``start`` by ``step``.
+
+    None if it turns down first (a crest) or the walk would pass ``limit``.
+    """
+    prev_v, prev_u = start, f(start)
+    u = start
+    while abs(u + step - start) <= limit:
+        u = prev_v + step
+        fu = f(u)
+        if fu >= h:
+            return float(brentq(lambda z: f(z) - h, prev_v, u, xtol=1e-13))
+        if fu < prev_u:
+            return None
+        prev_v, prev_u = u, fu
+    return None
+
+
+def bead_period(path: Polynomial, x_r: float, height: float, gravity: float) -> float:
+    """[s] The period of a frictionless bead on ``y = path(x)``, ``height`` above ``x_r``.
+
+    ``x'' (1 + y'^2) + y' y'' x'^2 + g y' = 0``, released from rest at the turning point
+    right of the lowest point ``x_r``. NaN where the path, within its samples' range, holds
+    no swing that high on both sides.
+    """
+    d1, d2 = path.deriv(), path.deriv(2)
+    y_r = float(path(x_r))
+    lo, hi = (float(v) for v in path.domain)  # the samples' range: no extrapolation
+    x2 = _other_side(lambda z: float(path(z)) - y_r, height, x_r, 1e-4, hi - x_r)
+    x1 = _other_side(lambda z: float(path(z)) - y_r, height, x_r, -1e-4, x_r - lo)
+    if x1 is None or x2 is None:
+        return math.nan
+
+    def rhs(_t: float, s: FloatArray) -> FloatArray:
+        a, b = float(d1(s[0])), float(d2(s[0]))
+        return np.array([s[1], -(gravity * a + a * b * s[1] ** 2) / (1.0 + a * a)])
+
+    return _out_and_back(rhs, np.array([x2, 0.0]), 1.0)
 
 
 class _Ball:
@@ -269,21 +357,43 @@ class _Ball:
     def rest(self, near_x: float, near_y: float) -> float:
         """The stable rest angle nearest ``(near_x, near_y)`` [m].
 
-        Among the roots of G2 with dG2/dphi > 0, the one whose centre is nearest.
+        Among the roots of G2 with dG2/dphi > 0 whose normal force is positive (the ball on
+        the edge, not under it), the one whose centre is nearest; within
+        :data:`MAX_REST_OFFSET`.
         """
         ph = np.linspace(-math.pi, math.pi, 4097)
         g = np.asarray(self.g2(ph), float)
         up = np.nonzero((g[:-1] < 0.0) & (g[1:] >= 0.0))[0]
-        if up.size == 0:
-            raise ValueError("the model has no rest point on this held frame")
         roots = np.array([brentq(lambda p: float(self.g2(p)), ph[k], ph[k + 1], xtol=1e-13)
                           for k in up])
+        if roots.size:
+            fn = self.model.normal_force(np.stack([np.full_like(roots, self.theta), roots,
+                                                   0.0 * roots, 0.0 * roots], -1))
+            roots = roots[np.asarray(fn) > 0.0]
+        if roots.size == 0:
+            raise ValueError("the model has no rest point on this held frame")
         c = self.centre(roots)
-        return float(roots[np.argmin(np.hypot(c[:, 0] - near_x, c[:, 1] - near_y))])
+        dist = np.hypot(c[:, 0] - near_x, c[:, 1] - near_y)
+        k = int(np.argmin(dist))
+        if dist[k] > MAX_REST_OFFSET:
+            raise ValueError(f"the model's nearest rest point is {dist[k] * 1e3:.0f} mm from "
+                             "the measured one")
+        return float(roots[k])
+
+    def path_radius(self, phi: float, h: float = 1e-4) -> float:
+        """[m] The centre path's radius of curvature at phi (the parametric curve's)."""
+        c = self.centre(np.array([phi - h, phi, phi + h]))
+        d1 = (c[2] - c[0]) / (2.0 * h)
+        d2 = (c[2] - 2.0 * c[1] + c[0]) / h ** 2
+        return float((d1 @ d1) ** 1.5 / abs(d1[0] * d2[1] - d1[1] * d2[0]))
+
+    def height(self, phi: float) -> float:
+        """The centre's height [m] at contact angle phi (the potential over m_b g)."""
+        return float(self.centre(phi)[1])
 
 
 def model_swing(params: RigParams, theta: float, amplitudes: FloatArray,
-                near_x: float, near_y: float, half_width: float) -> HeldSwing:
+                near_x: float, near_y: float, x_range: tuple[float, float]) -> HeldSwing:
     """The model's rest point, path and swing periods on a frame held at ``theta``.
 
     Parameters
@@ -293,63 +403,70 @@ def model_swing(params: RigParams, theta: float, amplitudes: FloatArray,
     theta : float
         [rad] The frame's angle.
     amplitudes : ndarray
-        [m] The swings' amplitudes (horizontal excursion of the centre from rest).
+        [m] The swings' amplitudes (half peak-to-peak horizontal excursion of the centre).
     near_x, near_y : float
         [m] The measured rest point: the model's stable rest point nearest it is taken.
-    half_width : float
-        [m] The path is fitted within this of the rest point (as measured).
+    x_range : tuple of float
+        [m] The measured centre's x range relative to its rest point: the model's path is
+        fitted over the same range about its own.
+
+    Raises
+    ------
+    ValueError
+        The model has no stable rest point with the ball on the edge within
+        :data:`MAX_REST_OFFSET` of the measured one.
     """
     ball = _Ball(params, theta)
     phi_r = ball.rest(near_x, near_y)
     xr = float(ball.centre(phi_r)[0])
-    # the path about the rest point, as it is measured
-    dph = np.linspace(-0.6, 0.6, 1201)
+    dph = np.linspace(-0.8, 0.8, 3201)
     c = ball.centre(phi_r + dph)
-    rest_x, rest_y, radius = _path_fit(c[:, 0], c[:, 1], half_width, xr)
-    # the direction of phi in which the centre moves right
-    right = 1.0 if c[-1, 0] > c[0, 0] else -1.0
-    periods = np.array([_period(ball, phi_r, right, xr, float(a)) for a in amplitudes])
-    yr = float(ball.centre(phi_r)[1])
-    reach = 1.2 * max(float(np.max(amplitudes, initial=0.0)), half_width)
-    near = np.abs(c[:, 0] - xr) <= reach
+    inside = (c[:, 0] - xr >= x_range[0]) & (c[:, 0] - xr <= x_range[1])
+    # the connected piece of the path through the rest point
+    mid = dph.size // 2
+    lo = mid - np.argmin(inside[mid::-1]) + 1 if not inside[mid::-1].all() else 0
+    hi = mid + np.argmin(inside[mid:]) if not inside[mid:].all() else dph.size
+    p = Polynomial.fit(c[lo:hi, 0], c[lo:hi, 1], PATH_DEGREE)  # drawn beside the measured
+    rest_x, rest_y = (float(v) for v in ball.centre(phi_r))
+    radius = ball.path_radius(phi_r)
+    # phi moving the centre right
+    right = 1.0 if float(ball.centre(phi_r + 1e-4)[0]) > xr else -1.0
+    periods = np.array([_model_period(ball, phi_r, right, float(a)) for a in amplitudes])
     return HeldSwing(theta=float(theta), rest_x=rest_x, rest_y=rest_y, path_radius=radius,
-                     amplitudes=np.asarray(amplitudes, float), periods=periods,
-                     path_x=c[near, 0][::4] - xr, path_y=c[near, 1][::4] - yr)
+                     amplitudes=np.asarray(amplitudes, float), periods=periods, path=p)
 
 
-def _period(ball: _Ball, phi_r: float, right: float, xr: float, amp: float) -> float:
-    """The period of (1) swinging ``amp`` right of the rest point.
+def _model_period(ball: _Ball, phi_r: float, right: float, amp: float) -> float:
+    """The period of (1) for the swing of half peak-to-peak ``amp``; NaN past a crest.
 
-    From rest at that turning point, the time out to the other turning point and back (NaN
-    if the ball does not come back within :data:`MAX_PERIOD` each way).
+    The release point right of rest is the one whose turning point left of rest, at the same
+    height (energy is conserved), is ``2 amp`` from it in x: both sides of the valley
+    tabulated out to their crests (the heights rise monotonically to them), the release
+    interpolated between table points (5e-4 rad apart).
     """
-    def dx(d: float) -> float:
-        return float(ball.centre(phi_r + right * d)[0]) - xr - amp
-
-    try:
-        d = brentq(dx, 0.0, 1.5, xtol=1e-12)
-    except ValueError:
+    d = np.linspace(0.0, 1.5, 3001)
+    cr, cl = ball.centre(phi_r + right * d), ball.centre(phi_r - right * d)
+    y_r = float(cr[0, 1])
+    hr, hl = cr[:, 1] - y_r, cl[:, 1] - y_r
+    kr, kl = _crest(hr), _crest(hl)
+    i = np.arange(1, kr + 1)
+    i = i[hr[i] <= hl[kl]]  # a release above the left crest goes over it
+    if i.size == 0:
         return math.nan
+    x_left = np.interp(hr[i], hl[:kl + 1], cl[:kl + 1, 0])
+    half = 0.5 * (cr[i, 0] - x_left)
+    if amp > half.max() or amp < half.min():
+        return math.nan
+    j = int(np.argmax(half >= amp))
+    dr = float(d[i[0]]) if j == 0 else float(np.interp(amp, half[j - 1:j + 1],
+                                                        d[i[j - 1:j + 1]]))
+    return _out_and_back(ball.rhs, np.array([phi_r + right * dr, 0.0]), right)
 
-    def half(state: FloatArray, direction: float) -> tuple[float, FloatArray] | None:
-        """Time and state at the next turning point of (1), or None if it does not come.
 
-        A turning point: the centre's x velocity crossing zero in ``direction``.
-        """
-        def turn(_t: float, s: FloatArray) -> float:
-            return right * float(s[1])
-
-        turn.terminal = True  # type: ignore[attr-defined]
-        turn.direction = direction  # type: ignore[attr-defined]
-        sol = solve_ivp(ball.rhs, (0.0, MAX_PERIOD), state, method="DOP853", rtol=1e-10,
-                        atol=1e-12, events=turn)
-        if not sol.t_events[0].size:
-            return None
-        return float(sol.t_events[0][0]), sol.y_events[0][0]
-
-    out = half(np.array([phi_r + right * d, 0.0]), 1.0)  # out to the left turning point
-    back = None if out is None else half(out[1], -1.0)  # and back to the right one
-    return math.nan if out is None or back is None else out[0] + back[0]
+def _crest(h: FloatArray) -> int:
+    """Index of the last point of the heights' first monotonic rise (a crest or the end)."""
+    down = np.nonzero(np.diff(h) <= 0.0)[0]
+    return int(down[0]) if down.size else h.size - 1
 
 
 def spin_share(params: RigParams) -> float:
@@ -362,13 +479,57 @@ def waist_period(params: RigParams) -> float:
     """[s] The small-swing period (3) in the upper waist of the seed's contour, frame level.
 
     ``2 pi sqrt((rho_c - R) (1 + J_b / (m_b R^2)) / g)``, ``rho_c = (a - b)^2 / (5 b - a)``:
-    the closed form of (2) for ``r = a - b cos 2 phi`` (no harmonics, no bump).
+    the closed form of (2) for ``r = a - b cos 2 phi`` (no harmonics, no bump; g in the
+    frame's plane).
     """
     a, b = params.frame.contour.a, params.frame.contour.b
     rr = params.ball.rolling_radius
     rho_c = (a - b) ** 2 / (5.0 * b - a)
     return 2.0 * math.pi * math.sqrt((rho_c - rr) * (1.0 + spin_share(params))
-                                     / params.environment.gravity)
+                                     / params.environment.in_plane_gravity)
+
+
+def closed_form(meas: HeldSwing, nominal: RigParams, pred: HeldSwing) -> dict[str, Any] | None:
+    """What the swing says of the ball in closed form: its spin's share and rolling radius.
+
+    By (4), each swing's ``kappa_i = (T_i / T_bead(E_i))^2 - 1`` on the measured path
+    (:func:`bead_period`); ``kappa`` their mean, with a t interval over the swings (the
+    swings' scatter; the camera's scale is taken as calibrated: ``1 + kappa`` scales with its
+    inverse). Then ``R_spin = sqrt((J_b / m_b) / kappa)`` with the nominal ball's ``J_b /
+    m_b`` (a weighed ball and its shell). Beside it, from the rest point, ``R_rest =
+    R_nominal + (d_rest - d_rest,nominal)`` (the ball's centre rides R above the edge): it
+    rests on the camera's offset and on the contour's height at the rest point being the
+    nominal model's, so it is a second reading, not an independent one. With both,
+    ``J_b / m_b = kappa R_rest^2`` (a thin shell's is ``2 R_b^2 / 3``). None with fewer than
+    three swings the bead can swing.
+    """
+    if meas.path is None:
+        return None
+    g = nominal.environment.in_plane_gravity
+    bead = np.array([bead_period(meas.path, meas.rest_x, float(h), g) for h in meas.heights])
+    kap = (meas.periods / bead) ** 2 - 1.0
+    kap = kap[np.isfinite(kap)]
+    if kap.size < 3:
+        return None
+    k = float(np.mean(kap))
+    half = float(stats.t.ppf(0.975, kap.size - 1) * np.std(kap, ddof=1) / math.sqrt(kap.size))
+    ball = nominal.ball
+    r_nom = ball.rolling_radius
+    jm = ball.inertia / ball.mass
+    r_rest = r_nom + meas.rest_distance - pred.rest_distance
+
+    def radius(kv: float) -> float | None:
+        return math.sqrt(jm / kv) if kv > 0.0 else None
+
+    return {
+        "spin_share": k, "spin_share_ci95": [k - half, k + half],
+        "spin_share_per_swing": [float(v) for v in kap],
+        "spin_share_nominal": spin_share(nominal), "rolling_radius_nominal": r_nom,
+        "rolling_radius_from_rest": r_rest,
+        "rolling_radius_from_spin_share": radius(k),
+        "rolling_radius_from_spin_share_ci95": [radius(k + half), radius(k - half)],
+        "inertia_per_mass_from_both": k * r_rest ** 2, "inertia_per_mass_nominal": jm,
+    }
 
 
 def held_frame_check(prep: Prepared, models: dict[str, RigParams]) -> dict[str, Any]:
@@ -385,104 +546,65 @@ def held_frame_check(prep: Prepared, models: dict[str, RigParams]) -> dict[str, 
     -------
     dict
         ``measured`` and per model ``rest_x``, ``rest_y``, ``rest_distance``,
-        ``path_radius`` [m], ``amplitudes`` [m] and ``periods`` [s] (per swing), and per
-        model ``period_ratio`` (median of measured over predicted), ``meaning``; or
+        ``path_radius`` [m], ``amplitudes`` [m] and ``periods`` [s] (per swing),
+        ``period_ratio`` (median of measured over predicted) and ``spin_share``;
+        ``closed_form`` (:func:`closed_form`, against ``nominal``); ``meaning``; or
         ``{"measured": None, "why": ...}`` when the swing cannot be measured.
     """
     ok = prep.ball_ok & np.isfinite(prep.ball_xy[0])
-    theta = float(np.median(prep.theta[ok])) if ok.any() else float(np.median(prep.theta))
+    if not ok.any():
+        return {"measured": None, "why": "no ball positions on the held frame"}
+    spread = float(np.ptp(prep.theta[ok]))
+    if spread > MAX_THETA_SPREAD:
+        return {"measured": None, "why": f"the frame was held at several angles (spread "
+                f"{spread:.3g} rad): one path needs one angle"}
+    theta = float(np.median(prep.theta[ok]))
     x = np.where(ok, prep.ball_xy[0], np.nan)
     y = np.where(ok, prep.ball_xy[1], np.nan)
     try:
         meas = measure_swing(prep.t, x, y, theta, float(prep.noise.get("camera", 0.0)))
     except ValueError as exc:
         return {"measured": None, "why": str(exc)}
-    half = path_half_width(x[ok])
-    out: dict[str, Any] = {"theta": theta, "measured": _json(meas), "models": {}}
+    xs = x[ok] - meas.rest_x
+    x_range = (float(np.min(xs)), float(np.max(xs)))
+    out: dict[str, Any] = {"theta": theta, "measured": _json(meas, x_range), "models": {}}
     for label, params in models.items():
         try:
             pred = model_swing(params, theta, meas.amplitudes, meas.rest_x, meas.rest_y,
-                               half)
+                               x_range)
         except ValueError as exc:
             out["models"][label] = {"why": str(exc)}
             continue
-        d = _json(pred)
+        d = _json(pred, x_range)
         d["spin_share"] = spin_share(params)
         ratio = meas.periods / pred.periods
         good = np.isfinite(ratio)
         d["period_ratio"] = float(np.median(ratio[good])) if good.any() else None
         out["models"][label] = d
         if label == "nominal":
-            out["closed_form"] = closed_form(meas, params, pred)
+            try:
+                out["closed_form"] = closed_form(meas, params, pred)
+            except (ValueError, FloatingPointError, np.linalg.LinAlgError) as exc:
+                out["closed_form"] = None
+                out["closed_form_why"] = str(exc)
     out["meaning"] = _meaning(out)
     return out
 
 
-def closed_form(meas: HeldSwing, nominal: RigParams, pred: HeldSwing) -> dict[str, Any] | None:
-    """What the swing says of the ball in closed form: its spin's share and rolling radius.
-
-    (2) holds for any path: the ball rolls about the line of its contacts, so its kinetic
-    energy is ``m_b v_c^2 (1 + kappa) / 2``, ``kappa = J_b / (m_b R^2)``, and its potential
-    ``m_b g s^2 / (2 rho)`` along a path of radius rho. The small swing's period ``T0``
-    (``T = T0 + c A^2`` fitted over the swings) and the measured path radius give
-
-        kappa = g T0^2 / (4 pi^2 rho) - 1,        R_spin = sqrt((J_b / m_b) / kappa)
-
-    with the nominal ball's ``J_b / m_b`` (a weighed ball and its shell; the camera's scale
-    taken as calibrated: ``1 + kappa`` scales with its inverse). Beside it, from the rest
-    point alone, ``R_rest = R_nominal + (d_rest - d_rest,nominal)`` (the ball's centre rides R
-    above the edge; the contour's height at the rest point and the camera's offset taken as
-    nominal). Two estimates resting on different assumptions: where they agree, the rolling
-    radius is measured twice. Taken together (R from the rest point, kappa from the swing)
-    they give the ball's own ``J_b / m_b = kappa R_rest^2`` (a thin shell's is
-    ``2 R_b^2 / 3``). None with fewer than three swings.
-    """
-    ok = np.isfinite(meas.periods)
-    if np.count_nonzero(ok) < 3:
-        return None
-    a2 = meas.amplitudes[ok] ** 2
-    X = np.column_stack([np.ones(a2.size), a2])
-    coef, res, *_ = np.linalg.lstsq(X, meas.periods[ok], rcond=None)
-    t0 = float(coef[0])
-    dof = max(a2.size - 2, 1)
-    s2 = float(res[0]) / dof if res.size else 0.0
-    se_t0 = float(math.sqrt(s2 * np.linalg.inv(X.T @ X)[0, 0]))
-    g = nominal.environment.gravity
-    ball = nominal.ball
-    r_nom = ball.rolling_radius
-    jm = ball.inertia / ball.mass
-    # the ball that fits both: R from the rest point, J_b / m_b = kappa R^2 from the swing
-    r_rest = r_nom + meas.rest_distance - pred.rest_distance
-
-    def kappa(t: float) -> float:
-        return g * t ** 2 / (4.0 * math.pi ** 2 * meas.path_radius) - 1.0
-
-    k = kappa(t0)
-    k_lo, k_hi = kappa(t0 - 1.96 * se_t0), kappa(t0 + 1.96 * se_t0)
-    out: dict[str, Any] = {
-        "small_swing_period": t0, "small_swing_period_se": se_t0,
-        "spin_share": k, "spin_share_ci95": [k_lo, k_hi],
-        "spin_share_nominal": spin_share(nominal), "rolling_radius_nominal": r_nom,
-        "rolling_radius_from_rest": r_rest,
-        "inertia_per_mass_from_both": k * r_rest ** 2,
-        "inertia_per_mass_nominal": jm,
-        "rolling_radius_from_spin_share": math.sqrt(jm / k) if k > 0.0 else None,
-        "rolling_radius_from_spin_share_ci95": ([math.sqrt(jm / k_hi) if k_hi > 0 else None,
-                                                 math.sqrt(jm / k_lo) if k_lo > 0 else None]),
-    }
-    return out
-
-
-def _json(s: HeldSwing) -> dict[str, Any]:
+def _json(s: HeldSwing, x_range: tuple[float, float]) -> dict[str, Any]:
     per = s.periods[np.isfinite(s.periods)]
-    return {"rest_x": s.rest_x, "rest_y": s.rest_y, "rest_distance": s.rest_distance,
-            "path_radius": s.path_radius, "n_swings": int(s.periods.size),
-            "amplitudes": [float(a) for a in s.amplitudes],
-            "periods": [float(p) if math.isfinite(p) else None for p in s.periods],
-            "times": [float(v) for v in s.times],
-            **({"path": {"x": [float(v) for v in s.path_x], "y": [float(v) for v in s.path_y]}}
-               if s.path_x.size else {}),
-            "period_median": float(np.median(per)) if per.size else None}
+    d: dict[str, Any] = {
+        "rest_x": s.rest_x, "rest_y": s.rest_y, "rest_distance": s.rest_distance,
+        "path_radius": s.path_radius, "n_swings": int(s.periods.size),
+        "amplitudes": [float(a) for a in s.amplitudes],
+        "periods": [float(p) if math.isfinite(p) else None for p in s.periods],
+        "times": [float(v) for v in s.times], "heights": [float(v) for v in s.heights],
+        "period_median": float(np.median(per)) if per.size else None}
+    if s.path is not None:
+        xs = np.linspace(x_range[0], x_range[1], 81)
+        d["path"] = {"x": [float(v) for v in xs],
+                     "y": [float(v) for v in s.path(s.rest_x + xs) - s.rest_y]}
+    return d
 
 
 def _meaning(out: dict[str, Any]) -> str:
@@ -508,10 +630,11 @@ def _meaning(out: dict[str, Any]) -> str:
     text = head + ("; " + "; ".join(parts) if parts else "")
     cf = out.get("closed_form")
     if cf and cf["rolling_radius_from_spin_share"] is not None:
-        text += (f". In closed form its small swing ({cf['small_swing_period']:.3g} s) and path "
-                 f"give the spin's share J_b / (m_b R^2) = {cf['spin_share']:.2f} (nominal "
-                 f"{cf['spin_share_nominal']:.2f}): with the nominal ball a rolling radius of "
-                 f"{cf['rolling_radius_from_spin_share'] * 1e3:.1f} mm; its rest point says "
-                 f"{cf['rolling_radius_from_rest'] * 1e3:.1f} mm (nominal "
+        lo, hi = cf["spin_share_ci95"]
+        text += (f". Each swing against a bead's on the measured path gives the spin's share "
+                 f"J_b / (m_b R^2) = {cf['spin_share']:.2f} [{lo:.2f}, {hi:.2f}] (nominal "
+                 f"{cf['spin_share_nominal']:.2f}; the camera's scale taken as calibrated): "
+                 "with the nominal ball a rolling radius of "
+                 f"{cf['rolling_radius_from_spin_share'] * 1e3:.1f} mm (nominal "
                  f"{cf['rolling_radius_nominal'] * 1e3:.1f} mm)")
     return text

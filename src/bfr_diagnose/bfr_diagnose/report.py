@@ -442,16 +442,18 @@ def _md_held(d: Diagnosis) -> list[str]:
                      f"{md['path_radius'] * 1e3:.0f} | {per} | {ratio} | "
                      f"{md['spin_share']:.2f} |")
         if cf and cf["rolling_radius_from_spin_share"] is not None:
-            L += ["", f"**{name}**, in closed form: the small swing's period "
-                  f"{cf['small_swing_period']:.3f} +- {cf['small_swing_period_se']:.3f} s and "
-                  f"the path give the spin's share {cf['spin_share']:.2f}; with the nominal "
-                  f"ball's J_b / m_b that is a rolling radius of "
-                  f"{cf['rolling_radius_from_spin_share'] * 1e3:.1f} mm, and the rest point "
-                  f"says {cf['rolling_radius_from_rest'] * 1e3:.1f} mm (nominal "
-                  f"{cf['rolling_radius_nominal'] * 1e3:.1f} mm; the camera's scale and offset "
-                  "taken as calibrated); both together give the ball's J_b / m_b = "
-                  f"{cf['inertia_per_mass_from_both']:.3g} m^2 (nominal "
-                  f"{cf['inertia_per_mass_nominal']:.3g}).", ""]
+            lo, hi = cf["spin_share_ci95"]
+            L += ["", f"**{name}**, in closed form: each swing's period against a "
+                  "frictionless bead's on the measured path at the swing's height gives the "
+                  f"spin's share {cf['spin_share']:.2f} [{lo:.2f}, {hi:.2f}] (mean of "
+                  f"{len(cf['spin_share_per_swing'])} swings, t interval; the camera's scale "
+                  "taken as calibrated); with the nominal ball's J_b / m_b that is a rolling "
+                  f"radius of {cf['rolling_radius_from_spin_share'] * 1e3:.1f} mm (nominal "
+                  f"{cf['rolling_radius_nominal'] * 1e3:.1f} mm). The rest point, "
+                  f"{(m['rest_distance'] - h['models']['nominal']['rest_distance']) * 1e3:+.1f}"
+                  " mm from the nominal model's, would put R at "
+                  f"{cf['rolling_radius_from_rest'] * 1e3:.1f} mm if the camera's offset and "
+                  "the contour's height there were the nominal's.", ""]
     return [*L, ""]
 
 
