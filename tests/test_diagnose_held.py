@@ -137,7 +137,7 @@ def test_several_held_angles_are_refused() -> None:
                                np.random.default_rng(3), theta=0.0, phi0=0.2)
     parts, _ = plan_parts([rec])
     prep = parts[0][2]
-    tilted = dataclasses.replace(prep, theta=prep.theta + np.linspace(0.0, 0.01, prep.n))
+    tilted = dataclasses.replace(prep, theta=prep.theta + np.linspace(0.0, 0.05, prep.n))
     h = held_frame_check(tilted, {"nominal": NOMINAL})
     assert h["measured"] is None and "several angles" in h["why"]
 

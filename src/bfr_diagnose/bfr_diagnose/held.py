@@ -95,8 +95,9 @@ MIN_PROMINENCE = 2e-4
 MIN_EXCURSION = 2e-3
 #: Degree of the polynomial path ``y = p(x)``.
 PATH_DEGREE = 6
-#: [rad] Largest spread of the held frame's angle over the part (one path needs one angle).
-MAX_THETA_SPREAD = 2e-3
+#: [rad] Largest spread (1st to 99th percentile) of the held frame's angle over the part:
+#: one path needs one angle (a held frame whose encoder flickers by a count or two is one).
+MAX_THETA_SPREAD = 0.01
 #: [m] Largest distance of a model's rest point from the measured one.
 MAX_REST_OFFSET = 0.02
 #: The most swings timed (spread over their amplitudes): each model integrates each one.
@@ -554,7 +555,7 @@ def held_frame_check(prep: Prepared, models: dict[str, RigParams]) -> dict[str, 
     ok = prep.ball_ok & np.isfinite(prep.ball_xy[0])
     if not ok.any():
         return {"measured": None, "why": "no ball positions on the held frame"}
-    spread = float(np.ptp(prep.theta[ok]))
+    spread = float(np.subtract(*np.percentile(prep.theta[ok], [99.0, 1.0])))
     if spread > MAX_THETA_SPREAD:
         return {"measured": None, "why": f"the frame was held at several angles (spread "
                 f"{spread:.3g} rad): one path needs one angle"}
