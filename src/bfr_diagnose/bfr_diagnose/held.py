@@ -72,7 +72,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from bfr_model.dynamics import RigidModel, curve_terms, gravity_from_curve, mass_terms
+from bfr_model.dynamics import RigidModel, mass_terms
 from bfr_model.params import RigParams
 from numpy.polynomial import Polynomial
 from numpy.typing import NDArray
@@ -337,12 +337,10 @@ class _Ball:
     def __init__(self, params: RigParams, theta: float) -> None:
         self.model = RigidModel(params)
         self.theta = float(theta)
-        self.st, self.ct = math.sin(theta), math.cos(theta)
 
     def g2(self, phi: float | FloatArray) -> FloatArray:
         """``G2(theta, phi)`` [N m]."""
-        g = curve_terms(np.asarray(phi, float), *self.model.kernel_args)
-        return gravity_from_curve(self.st, self.ct, g[0], g[1], g[2], g[3], self.model.P)[1]
+        return self.model.gravity_vector(self.theta, phi)[..., 1]
 
     def rhs(self, _t: float, s: FloatArray) -> FloatArray:
         m = mass_terms(np.asarray(s[0], float), *self.model.kernel_args)
@@ -381,16 +379,9 @@ class _Ball:
                              "the measured one")
         return float(roots[k])
 
-    def path_radius(self, phi: float, h: float = 1e-4) -> float:
-        """[m] The centre path's radius of curvature at phi (the parametric curve's)."""
-        c = self.centre(np.array([phi - h, phi, phi + h]))
-        d1 = (c[2] - c[0]) / (2.0 * h)
-        d2 = (c[2] - 2.0 * c[1] + c[0]) / h ** 2
-        return float((d1 @ d1) ** 1.5 / abs(d1[0] * d2[1] - d1[1] * d2[0]))
-
-    def height(self, phi: float) -> float:
-        """The centre's height [m] at contact angle phi (the potential over m_b g)."""
-        return float(self.centre(phi)[1])
+    def path_radius(self, phi: float) -> float:
+        """[m] The centre path's radius of curvature at phi (the offset curve's)."""
+        return float(1.0 / abs(self.model.curve.curvature(phi)))
 
 
 def model_swing(params: RigParams, theta: float, amplitudes: FloatArray,
@@ -432,18 +423,19 @@ def model_swing(params: RigParams, theta: float, amplitudes: FloatArray,
     radius = ball.path_radius(phi_r)
     # phi moving the centre right
     right = 1.0 if float(ball.centre(phi_r + 1e-4)[0]) > xr else -1.0
-    periods = np.array([_model_period(ball, phi_r, right, float(a)) for a in amplitudes])
+    valley = _valley(ball, phi_r, right)
+    periods = np.array([_model_period(ball, valley, phi_r, right, float(a))
+                        for a in amplitudes])
     return HeldSwing(theta=float(theta), rest_x=rest_x, rest_y=rest_y, path_radius=radius,
                      amplitudes=np.asarray(amplitudes, float), periods=periods, path=p)
 
 
-def _model_period(ball: _Ball, phi_r: float, right: float, amp: float) -> float:
-    """The period of (1) for the swing of half peak-to-peak ``amp``; NaN past a crest.
+def _valley(ball: _Ball, phi_r: float, right: float) -> tuple[FloatArray, ...]:
+    """Both sides of the valley, tabulated out to their crests (5e-4 rad apart).
 
-    The release point right of rest is the one whose turning point left of rest, at the same
-    height (energy is conserved), is ``2 amp`` from it in x: both sides of the valley
-    tabulated out to their crests (the heights rise monotonically to them), the release
-    interpolated between table points (5e-4 rad apart).
+    ``(d, release_x, release_h, left_h, left_x)``: the release points right of rest at
+    ``phi_r + right d`` (their x and height above rest, up to the right crest and no higher
+    than the left one) and the left side's rising heights and their x.
     """
     d = np.linspace(0.0, 1.5, 3001)
     cr, cl = ball.centre(phi_r + right * d), ball.centre(phi_r - right * d)
@@ -452,15 +444,25 @@ def _model_period(ball: _Ball, phi_r: float, right: float, amp: float) -> float:
     kr, kl = _crest(hr), _crest(hl)
     i = np.arange(1, kr + 1)
     i = i[hr[i] <= hl[kl]]  # a release above the left crest goes over it
-    if i.size == 0:
+    return d[i], cr[i, 0], hr[i], hl[:kl + 1], cl[:kl + 1, 0]
+
+
+def _model_period(ball: _Ball, valley: tuple[FloatArray, ...], phi_r: float, right: float,
+                  amp: float) -> float:
+    """The period of (1) for the swing of half peak-to-peak ``amp``; NaN past a crest.
+
+    The release point right of rest is the one whose turning point left of rest, at the same
+    height (energy is conserved), is ``2 amp`` from it in x (:func:`_valley`; the heights rise
+    monotonically to the crests), interpolated between table points.
+    """
+    d, x_rel, h_rel, h_left, x_left_side = valley
+    if d.size == 0:
         return math.nan
-    x_left = np.interp(hr[i], hl[:kl + 1], cl[:kl + 1, 0])
-    half = 0.5 * (cr[i, 0] - x_left)
+    half = 0.5 * (x_rel - np.interp(h_rel, h_left, x_left_side))
     if amp > half.max() or amp < half.min():
         return math.nan
     j = int(np.argmax(half >= amp))
-    dr = float(d[i[0]]) if j == 0 else float(np.interp(amp, half[j - 1:j + 1],
-                                                        d[i[j - 1:j + 1]]))
+    dr = float(d[0]) if j == 0 else float(np.interp(amp, half[j - 1:j + 1], d[j - 1:j + 1]))
     return _out_and_back(ball.rhs, np.array([phi_r + right * dr, 0.0]), right)
 
 
