@@ -121,9 +121,13 @@ def start_nodes(node_processes, h: rosutil.RosHarness, camera_yaml: Path,  # noq
             "-p", "use_sim_time:=true"])
     h.wait_for_match(watch.state_sub, timeout=90)
     h.wait_for_match(watch.obs_sub, timeout=90)
+    # up, and the controller matched to the camera's observations (a reliable, volatile
+    # subscription gets nothing sent before its match, which can lag discovery by a second
+    # on a loaded machine: the ball released meanwhile was picked up 0.2 s late and lost)
     assert h.spin_until(lambda: "mode WAITING (no ball yet)" in ctl.output()
-                        and "camera: images" in cam.output(), timeout=90), \
-        ctl.output()[-2000:] + cam.output()[-2000:]
+                        and "camera: images" in cam.output()
+                        and "/ball_observation: matched 1 publisher(s)" in ctl.output(),
+                        timeout=90), ctl.output()[-2000:] + cam.output()[-2000:]
     return cam, ctl
 
 

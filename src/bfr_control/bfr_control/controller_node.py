@@ -48,7 +48,9 @@ measured part is 0.
 A freshly started node picks up a rolling ball (WAITING -> ROLLING once it has seen it near
 the orbit) or, if the ball is seen but stays off the orbit for ``safety.acquire_timeout``,
 reports it lost (mode BALL_LOST in ``controller_state``, one warning) while it keeps
-watching.
+watching. It logs each change of the camera publishers matched to its ``ball_observation``
+subscription (``/ball_observation: matched 1 publisher(s)``): from that line on it can see
+the ball, and an operator (or a test) may release it.
 """
 
 from __future__ import annotations
@@ -82,6 +84,7 @@ from bfr_ros.node_common import (
     stamp_to_ns,
 )
 from rclpy.clock import Clock, ClockType
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -225,8 +228,9 @@ class ControllerNode(Node):
         else:
             self.js_sub = PolledSubscription(self, JointState, "joint_states",
                                              JOINT_STATES_POLLED_QOS)
-        self.obs_sub = self.create_subscription(BallObservationMsg, "ball_observation",
-                                                self._on_ball, STATE_QOS)
+        self.obs_sub = self.create_subscription(
+            BallObservationMsg, "ball_observation", self._on_ball, STATE_QOS,
+            event_callbacks=SubscriptionEventCallbacks(matched=self._on_camera_matched))
         self.create_service(Trigger, "~/reset", self._on_reset)
         # timeouts on the node's clock: simulated time under use_sim_time
         self.create_timer(min(0.1, self.watchdog_timeout / 2.0), self._watchdog)
@@ -379,6 +383,18 @@ class ControllerNode(Node):
             self.ctrl.estimator.record(t_ns / _NS, got[1], got[2])
 
     @guarded("ball_observation")
+    def _on_camera_matched(self, status: Any) -> None:
+        """Log each change of the camera's publishers matched to ``ball_observation``.
+
+        A reliable, volatile subscription gets nothing published before the match, and the
+        match can lag the camera's start by seconds on a busy machine: this line is when the
+        controller can first see the ball (an operator, or a test, releases it after), and
+        when it can no longer (the camera node went away).
+        """
+        n = int(status.current_count)
+        what = f"{n} publisher(s)" if n else "no publisher (the camera went away)"
+        self.get_logger().info(f"{self.obs_sub.topic_name}: matched {what}")
+
     def _on_ball(self, msg: BallObservationMsg) -> None:
         self._watch_pause()
         self.take_joints()  # the encoder samples that arrived before this observation

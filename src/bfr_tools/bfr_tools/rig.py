@@ -610,7 +610,8 @@ def format_summary(s: dict[str, Any], wall: tuple[float, float] | None = None) -
     for topic, d in s["topics"].items():
         pub = published.get(topic)
         both = f"{d['count']:>7} / {pub if pub is not None else '?':>7}"
-        flag = "" if pub is None or pub == d["count"] else f"  ({pub - d['count']:+d} lost)"
+        flag = ("" if pub is None or pub == d["count"]
+                else f"  ({pub - d['count']:+d} not recorded)")
         lines.append(f"  {topic:<30} {both}  {d['rate']:8.1f} Hz  {d['type']}{flag}")
     return "\n".join(lines)
 
