@@ -40,6 +40,7 @@ from test_standin_integration import (
     camera_file,
     orbit_start_standin,
     standin_args,
+    start_nodes,
 )
 
 pytestmark = pytest.mark.slow
@@ -116,12 +117,7 @@ def test_commissioning_loop_on_a_rig_with_every_effect(ros_harness: rosutil.RosH
     #    test_standin_integration)
     watch = Watch(h)
     duration = 3.0  # at a fifth of real time
-    cam = node_processes.start("bfr_camera", "camera_node",
-                               ros_args=[*camera_args(cam_yaml), "--params-file", str(c2)])
-    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
-        "-p", "use_sim_time:=true", "--params-file", str(c2)])
-    h.wait_for_match(watch.state_sub, timeout=90)
-    assert h.spin_until(lambda c=ctl: "mode WAITING (no ball yet)" in c.output(), timeout=90)
+    cam, ctl = start_nodes(node_processes, h, cam_yaml, watch, params=c2)
     watch.states.clear()
     truth_csv = tmp_path / "truth.csv"
     rig = node_processes.start_python(str(STANDIN), args=standin_args({

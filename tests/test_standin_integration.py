@@ -102,23 +102,25 @@ def camera_args(camera_yaml: Path) -> list[str]:
 
 
 def start_nodes(node_processes, h: rosutil.RosHarness, camera_yaml: Path,  # noqa: ANN001
-                watch: Watch, composed: bool = False,
+                watch: Watch, composed: bool = False, params: Path | None = None,
                 ) -> tuple[rosutil.NodeProcess, rosutil.NodeProcess]:
     """Camera and controller, as ``ros2 run`` starts them, ready before the rig starts.
 
     ``composed``: both in one ``bfr_tools loop_node`` process pinned to the last CPU, as
-    ``bfr rig --realtime`` runs them (returned twice: one process).
+    ``bfr rig --realtime`` runs them (returned twice: one process). ``params``: a parameter
+    file given to both after their own (a diagnosis's corrected rig).
     """
+    extra = ["--params-file", str(params)] if params is not None else []
     if composed:
         cpu = loop_cpu_default()
         cam = node_processes.start("bfr_tools", "loop_node", ros_args=[
-            *camera_args(camera_yaml), "-p", f"process.cpu:={cpu}"])
+            *camera_args(camera_yaml), "-p", f"process.cpu:={cpu}", *extra])
         ctl = cam
     else:
         cam = node_processes.start("bfr_camera", "camera_node",
-                                   ros_args=camera_args(camera_yaml))
+                                   ros_args=[*camera_args(camera_yaml), *extra])
         ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
-            "-p", "use_sim_time:=true"])
+            "-p", "use_sim_time:=true", *extra])
     h.wait_for_match(watch.state_sub, timeout=90)
     h.wait_for_match(watch.obs_sub, timeout=90)
     # up, and the controller matched to the camera's observations (a reliable, volatile
