@@ -37,6 +37,22 @@ def header_stamps(bag: str, topic: str) -> np.ndarray:
     return np.array(out, dtype=np.int64)
 
 
+def answered(bag: str, inputs: str, answers: str) -> float:
+    """Share of the recorded ``inputs`` answered by an ``answers`` message of the same stamp.
+
+    Over the span both were recorded (the recorder matches each publisher in its own time,
+    and a reliable, volatile subscription gets nothing sent before its match), which must
+    cover the run; there every answer must carry an input's stamp.
+    """
+    x, y = header_stamps(bag, inputs), header_stamps(bag, answers)
+    assert x.size and y.size, (inputs, x.size, answers, y.size)
+    t0, t1 = max(x[0], y[0]), min(x[-1], y[-1])
+    assert (t1 - t0) / 1e9 >= 5.5, f"{inputs} and {answers} both over {(t1 - t0) / 1e9:.2f} s"
+    x, y = x[(x >= t0) & (x <= t1)], y[(y >= t0) & (y <= t1)]
+    assert np.all(np.isin(y, x)), f"{answers}: stamps of no {inputs}"
+    return float(np.isin(x, y).mean())
+
+
 def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHarness,
                                                       node_processes, tmp_path: Path) -> None:  # noqa: ANN001
     cam_yaml = tmp_path / "hw_camera.yaml"
@@ -67,8 +83,6 @@ def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHar
     # the camera saw the stand-in's ball in its images (the pose from the stand-in's file,
     # the intrinsics from its camera_info), the controller answered every encoder sample
     assert summary["camera_valid_fraction"] > 0.9, summary
-    assert topics["/ball_observation"]["count"] > 0.5 * 100 * duration
-    assert topics["/controller_state"]["count"] > 0.5 * 500 * duration
     assert summary["max_abs_torque"] <= 0.1 + 1e-12
     # stamped on this computer's clock (use_sim_time false), over --duration wall seconds
     assert summary["duration"] >= duration - 0.5
@@ -77,11 +91,12 @@ def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHar
     # state (not the counts against the published ones: the controller answers from its first
     # sample on, which precedes the recorder's match of it by up to 2 s on a loaded machine,
     # and a reliable, volatile subscription gets nothing sent before its match)
-    js, cs = header_stamps(summary["bag"], "/joint_states"), header_stamps(
-        summary["bag"], "/controller_state")
-    assert np.all(np.isin(cs, js))
-    window = js[(js >= cs[0]) & (js <= cs[-1])]
-    assert np.isin(window, cs).mean() > 0.9, (window.size, cs.size)
+    # (against what the stand-in sent, not its nominal 500 Hz: a Python stand-in beside a
+    # loaded machine's other processes sends fewer); the camera likewise measured its images
+    # (an observation is stamped with its image's stamp; images are best effort)
+    bag = summary["bag"]
+    assert answered(bag, "/joint_states", "/controller_state") > 0.9
+    assert answered(bag, "/camera/camera_info", "/ball_observation") > 0.5
     published = summary["published"]
     assert 0 < topics["/controller_state"]["count"] <= published["/controller_state"]
     loop_log = (log_dir / "loop.log").read_text()
