@@ -566,8 +566,8 @@ def held_frame_check(prep: Prepared, models: dict[str, RigParams]) -> dict[str, 
     y = np.where(ok, prep.ball_xy[1], np.nan)
     try:
         meas = measure_swing(prep.t, x, y, theta, float(prep.noise.get("camera", 0.0)))
-    except ValueError as exc:
-        return {"measured": None, "why": str(exc)}
+    except (ValueError, np.linalg.LinAlgError) as exc:  # a path a polynomial cannot fit
+        return {"measured": None, "why": f"the ball's path could not be measured: {exc}"}
     xs = x[ok] - meas.rest_x
     x_range = (float(np.min(xs)), float(np.max(xs)))
     out: dict[str, Any] = {"theta": theta, "measured": _json(meas, x_range), "models": {}}

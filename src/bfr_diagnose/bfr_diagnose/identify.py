@@ -1545,9 +1545,10 @@ def _at_bound(prob: Problem, fit: Fit) -> tuple[str, str] | None:
 
 def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
     """Why a joint fit is not identifiable, or None (see :func:`select_effects`)."""
-    if not fit.ok:
-        return "fit failed"
     bound = _at_bound(prob, fit)
+    if not fit.ok:  # the model not finite where the fit ended (a contour with a cusp, say)
+        return ("fit failed: the model is not finite at the fitted values"
+                + (f" ({bound[1]})" if bound is not None else ""))
     if bound is not None:
         return bound[1]
     if fit.cov is not None:  # a direction of the Jacobian's null space (see _covariance)
