@@ -138,6 +138,19 @@ def test_correlated_parameters_are_degenerate_only_when_the_data_do_not_fix_them
         assert "correlate 0.999" in why and f"{RESOLVED_Z:g} needed" in why
 
 
+def test_a_fit_that_could_not_be_evaluated_says_so_and_names_its_bound() -> None:
+    """A fit whose model was not finite at its end (``ok`` false) is not identified, and the
+    reason says so, with the parameter that ran to a bound if one did."""
+    base = RigParams()
+    eff = EFFECTS["joint_coulomb_friction"]
+    for value, bound in ((1e-3, False), (float(eff.upper[0]), True)):
+        fit = Fit(effects=[eff.name], values=[np.array([value])], sensors=[], cost_train=1.0,
+                  cost_test=1.0, cov=np.eye(1), n_params=1, ok=False)
+        why = _degenerate(SimpleNamespace(base=base), fit, 0.995)
+        assert why.startswith("fit failed: the model could not be evaluated"), why
+        assert ("upper bound" in why) is bound, why
+
+
 def test_a_parameter_the_data_do_not_fix_has_infinite_variance() -> None:
     """Two collinear columns (a frame off-centre and a camera offset on a held frame)."""
     rng = np.random.default_rng(3)

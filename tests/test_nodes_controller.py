@@ -239,3 +239,22 @@ def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
     h.spin_for(0.5)
     assert len(rig.cmds) > n_cmd and rig.cmds[-1] == 0.0
     assert "zero torque published on exit" in ctl.log_path.read_text()
+
+
+def test_every_callback_the_node_registers_puts_an_exception_into_fault() -> None:
+    """The node's promise (module docstring): an exception in any callback never ends it but
+    puts the controller in FAULT. Each callback it registers (joint_states, ball_observation,
+    timer, ~/reset, watchdog) is called on an object that has none of a node's state: the
+    error must reach ``_on_exception`` with the callback's name, not the caller."""
+    from types import SimpleNamespace  # noqa: PLC0415
+
+    from bfr_control.controller_node import ControllerNode  # noqa: PLC0415
+
+    calls = {"_on_joints": (b"",), "_on_ball": (BallObservation(),), "_on_timer": (),
+             "_on_reset": (Trigger.Request(), Trigger.Response()), "_watchdog": ()}
+    for name, args in calls.items():
+        seen: list[tuple[str, Exception]] = []
+        bare = SimpleNamespace(_on_exception=lambda where, exc, seen=seen: seen.append(
+            (where, exc)))
+        getattr(ControllerNode, name)(bare, *args)
+        assert len(seen) == 1 and isinstance(seen[0][1], Exception), (name, seen)

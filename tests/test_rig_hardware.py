@@ -37,19 +37,22 @@ def header_stamps(bag: str, topic: str) -> np.ndarray:
     return np.array(out, dtype=np.int64)
 
 
-def answered(bag: str, inputs: str, answers: str) -> float:
+def answered(bag: str, inputs: str, answers: str, duration: float) -> float:
     """Share of the recorded ``inputs`` answered by an ``answers`` message of the same stamp.
 
     Over the span both were recorded (the recorder matches each publisher in its own time,
     and a reliable, volatile subscription gets nothing sent before its match), which must
-    cover the run; there every answer must carry an input's stamp.
+    cover the run's ``duration`` [s] but half a second; there nearly every answer must carry
+    a recorded input's stamp (not every one: a best-effort input the recorder missed, or a
+    watchdog's state stamped with the clock, has none).
     """
-    x, y = header_stamps(bag, inputs), header_stamps(bag, answers)
+    x, y = np.sort(header_stamps(bag, inputs)), np.sort(header_stamps(bag, answers))
     assert x.size and y.size, (inputs, x.size, answers, y.size)
     t0, t1 = max(x[0], y[0]), min(x[-1], y[-1])
-    assert (t1 - t0) / 1e9 >= 5.5, f"{inputs} and {answers} both over {(t1 - t0) / 1e9:.2f} s"
+    span = (t1 - t0) / 1e9
+    assert span >= duration - 0.5, f"{inputs} and {answers} recorded together {span:.2f} s"
     x, y = x[(x >= t0) & (x <= t1)], y[(y >= t0) & (y <= t1)]
-    assert np.all(np.isin(y, x)), f"{answers}: stamps of no {inputs}"
+    assert np.isin(y, x).mean() > 0.98, f"{answers}: stamps of no {inputs}"
     return float(np.isin(x, y).mean())
 
 
@@ -95,8 +98,8 @@ def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHar
     # loaded machine's other processes sends fewer); the camera likewise measured its images
     # (an observation is stamped with its image's stamp; images are best effort)
     bag = summary["bag"]
-    assert answered(bag, "/joint_states", "/controller_state") > 0.9
-    assert answered(bag, "/camera/camera_info", "/ball_observation") > 0.5
+    assert answered(bag, "/joint_states", "/controller_state", duration) > 0.9
+    assert answered(bag, "/camera/camera_info", "/ball_observation", duration) > 0.5
     published = summary["published"]
     assert 0 < topics["/controller_state"]["count"] <= published["/controller_state"]
     loop_log = (log_dir / "loop.log").read_text()

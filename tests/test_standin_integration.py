@@ -39,6 +39,7 @@ import numpy as np
 import pytest
 import rosutil
 from bfr_control.controller import OrbitalController, load_controller_config
+from bfr_control.controller_node import CAMERA_MATCHED
 from bfr_model.param_file import load_ros_parameters
 from bfr_model.params import load_params
 from bfr_ros.node_common import STATE_QOS
@@ -128,7 +129,7 @@ def start_nodes(node_processes, h: rosutil.RosHarness, camera_yaml: Path,  # noq
     # on a loaded machine: the ball released meanwhile was picked up 0.2 s late and lost)
     assert h.spin_until(lambda: "mode WAITING (no ball yet)" in ctl.output()
                         and "camera: images" in cam.output()
-                        and "/ball_observation: matched 1 publisher(s)" in ctl.output(),
+                        and CAMERA_MATCHED.search(ctl.output()) is not None,
                         timeout=90), ctl.output()[-2000:] + cam.output()[-2000:]
     return cam, ctl
 

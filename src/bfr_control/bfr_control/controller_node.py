@@ -57,6 +57,7 @@ from __future__ import annotations
 
 import functools
 import math
+import re
 import time
 import traceback
 from collections import deque
@@ -106,6 +107,11 @@ from bfr_interfaces.msg import ControllerState
 __all__ = ["ControllerNode", "main", "node_defaults"]
 
 _NS = 1_000_000_000
+#: The line :meth:`ControllerNode._on_camera_matched` logs once a camera's publisher has
+#: matched the ``ball_observation`` subscription, as a pattern (the count may be any, the
+#: name the resolved topic's): from then on the node can see the ball; ``bfr rig`` and the
+#: tests wait for it before the ball is released.
+CAMERA_MATCHED = re.compile(r"ball_observation: matched [1-9][0-9]* publisher")
 _PAUSE_S = 0.03  # [s] wall time between observations worth a warning (6 frames at 200 Hz)
 MODE_CODES = {WAITING: ControllerState.WAITING, ROLLING: ControllerState.ROLLING,
               BALL_LOST: ControllerState.BALL_LOST}
@@ -382,7 +388,6 @@ class ControllerNode(Node):
         else:
             self.ctrl.estimator.record(t_ns / _NS, got[1], got[2])
 
-    @guarded("ball_observation")
     def _on_camera_matched(self, status: Any) -> None:
         """Log each change of the camera's publishers matched to ``ball_observation``.
 
@@ -395,6 +400,7 @@ class ControllerNode(Node):
         what = f"{n} publisher(s)" if n else "no publisher (the camera went away)"
         self.get_logger().info(f"{self.obs_sub.topic_name}: matched {what}")
 
+    @guarded("ball_observation")
     def _on_ball(self, msg: BallObservationMsg) -> None:
         self._watch_pause()
         self.take_joints()  # the encoder samples that arrived before this observation

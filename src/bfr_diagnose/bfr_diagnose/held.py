@@ -154,7 +154,11 @@ def _path(x: FloatArray, y: FloatArray) -> tuple[Polynomial, float, float, float
     """
     best = None
     for deg in range(2, PATH_DEGREE + 1):
-        q = Polynomial.fit(x, y, deg)
+        try:
+            q = Polynomial.fit(x, y, deg)
+        except np.linalg.LinAlgError as exc:  # least squares did not converge
+            raise ValueError(f"no path of degree {deg} fits the ball's positions ({exc})") \
+                from exc
         rss = float(np.sum((q(x) - y) ** 2))
         bic = x.size * math.log(max(rss, 1e-300) / x.size) + (deg + 1) * math.log(x.size)
         if best is None or bic < best[0]:
@@ -566,8 +570,8 @@ def held_frame_check(prep: Prepared, models: dict[str, RigParams]) -> dict[str, 
     y = np.where(ok, prep.ball_xy[1], np.nan)
     try:
         meas = measure_swing(prep.t, x, y, theta, float(prep.noise.get("camera", 0.0)))
-    except (ValueError, np.linalg.LinAlgError) as exc:  # a path a polynomial cannot fit
-        return {"measured": None, "why": f"the ball's path could not be measured: {exc}"}
+    except ValueError as exc:
+        return {"measured": None, "why": str(exc)}
     xs = x[ok] - meas.rest_x
     x_range = (float(np.min(xs)), float(np.max(xs)))
     out: dict[str, Any] = {"theta": theta, "measured": _json(meas, x_range), "models": {}}

@@ -1547,7 +1547,7 @@ def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
     """Why a joint fit is not identifiable, or None (see :func:`select_effects`)."""
     bound = _at_bound(prob, fit)
     if not fit.ok:  # the model not finite where the fit ended (a contour with a cusp, say)
-        return ("fit failed: the model is not finite at the fitted values"
+        return ("fit failed: the model could not be evaluated at the fitted values"
                 + (f" ({bound[1]})" if bound is not None else ""))
     if bound is not None:
         return bound[1]

@@ -57,6 +57,7 @@ from typing import IO, Any
 import numpy as np
 from bfr_control.constraint import VirtualConstraint
 from bfr_control.controller import load_controller_config
+from bfr_control.controller_node import CAMERA_MATCHED
 from bfr_control.orbit import PeriodicOrbit
 from bfr_model.dynamics import RigidModel
 from bfr_model.io.bag import make_typestore, read_bag_messages
@@ -804,7 +805,8 @@ def _bag_summary(bag: Path | None, mode: str, interrupted: bool,
     return summary
 
 
-#: What the camera and controller nodes log once they are up (their start-up lines).
+#: What the camera and controller nodes log once they are up (their start-up lines; and the
+#: controller's match to the camera, :data:`bfr_control.controller_node.CAMERA_MATCHED`).
 LOOP_READY = ("camera: images ", "mode WAITING (no ball yet)")
 
 
@@ -819,7 +821,7 @@ def _wait_loop_ready(nodes: dict[str, NodeSpec], timeout: float = 180.0) -> None
     while time.monotonic() - t0 < timeout:
         text = "".join(n.log_path.read_text(errors="replace") for n in logs
                        if n.log_path is not None and n.log_path.exists())
-        if all(marker in text for marker in LOOP_READY):
+        if all(marker in text for marker in LOOP_READY) and CAMERA_MATCHED.search(text):
             return
         for n in logs:
             if n.returncode is not None:

@@ -14,15 +14,13 @@ nodes' own code paths with the shipped parameters:
 - the camera: the ball's track (:func:`bfr_camera.camera_node.ball_track`) and the
   detector's compiled loops on a rendered frame.
 
-and, beside them in a second process (numba compiles on one core; the machine's second core
-was idle meanwhile), the analysis a researcher runs next, which compiled for 1-2 minutes in
-its first run on a fresh machine:
-
-- the force-based contact model (:func:`bfr_diagnose.synth.contact_recording`: the free
-  ball, compliant contact, friction-limited rolling) in bfr's closed loop;
-- ``bfr diagnose`` (:func:`bfr_diagnose.api.diagnose_recording`) of a short synthetic
-  recording with a concealed joint friction: the equation error's kernels, the fits, the
-  prediction rollouts, the ball's grip.
+and then the analysis a researcher runs next, which compiled for a minute or two in its
+first run on a fresh machine: ``bfr diagnose`` (:func:`bfr_diagnose.api.diagnose_recording`)
+of a short synthetic recording with a concealed joint friction (the equation error's
+kernels, the fits, the prediction rollouts, the ball's grip); and, in a second process
+beside all of these (numba compiles on one core; the machine's second was idle meanwhile),
+the force-based contact model (:func:`bfr_diagnose.synth.contact_recording`: the free ball,
+compliant contact, friction-limited rolling) in bfr's closed loop.
 
 Usage: ``bfr warm [--quiet] [--jobs N]``; exit status 0, or 1 with the failing step named.
 """
@@ -119,33 +117,46 @@ GROUPS: dict[str, dict[str, Callable[[], None]]] = {
 }
 
 
-def run_group(group: str) -> list[str]:
-    """Run one group's steps in order; their lines (``warm: <step>: <s> s``)."""
+class WarmError(RuntimeError):
+    """A step failed: its name, the exception's type and message."""
+
+
+def run_group(group: str, say: Callable[[str], None] | None = None) -> list[str]:
+    """Run one group's steps in order; their lines (``warm: <step>: <s> s``).
+
+    Each line goes to ``say`` as its step ends (if given) and is returned. A failing step
+    raises :class:`WarmError` naming it (picklable: a worker's reaches the parent).
+    """
     lines = []
     for name, step in GROUPS[group].items():
         t0 = time.perf_counter()
-        step()
+        try:
+            step()
+        except Exception as exc:  # noqa: BLE001 - named and raised again, one line
+            raise WarmError(f"{name}: {type(exc).__name__}: {exc}") from None
         lines.append(f"warm: {name}: {time.perf_counter() - t0:.1f} s")
+        if say is not None:
+            say(lines[-1])
     return lines
 
 
 def warm(say: Callable[[str], None] = print, jobs: int = 2) -> None:
-    """Run every group (module docstring), ``jobs`` of them at once; raises what a step raises.
+    """Run every group (module docstring), ``jobs`` of them at once.
 
     With ``jobs`` > 1 the groups after the first run in worker processes (spawned: numba's
-    compiled caches are files, shared by every process) while this one runs the first.
+    compiled caches are files, shared by every process) while this one runs the first and
+    says each step as it ends; the workers' lines follow. Raises :class:`WarmError`.
     """
     names = list(GROUPS)
-    if jobs <= 1:
+    workers = min(jobs, len(names)) - 1
+    if workers < 1:
         for g in names:
-            for line in run_group(g):
-                say(line)
+            run_group(g, say)
         return
     ctx = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(max_workers=min(jobs, len(names)) - 1, mp_context=ctx) as pool:
+    with ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as pool:
         others = [pool.submit(run_group, g) for g in names[1:]]
-        for line in run_group(names[0]):
-            say(line)
+        run_group(names[0], say)
         for fut in others:
             for line in fut.result():
                 say(line)
@@ -163,7 +174,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         p.error(f"--jobs {args.jobs}: expected 1 or more")
     try:
         warm((lambda s: None) if args.quiet else (lambda s: print(s, flush=True)), args.jobs)
-    except Exception as exc:  # noqa: BLE001 - name the failing step, one line
+    except WarmError as exc:
+        print(f"bfr warm: error: {exc}", file=sys.stderr)
+        return 1
+    except Exception as exc:  # noqa: BLE001 - a worker lost (killed, no memory): one line
         print(f"bfr warm: error: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
     return 0
