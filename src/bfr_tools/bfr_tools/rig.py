@@ -808,20 +808,26 @@ def _bag_summary(bag: Path | None, mode: str, interrupted: bool,
 #: What the camera and controller nodes log once they are up (their start-up lines; and the
 #: controller's match to the camera, :data:`bfr_control.controller_node.CAMERA_MATCHED`).
 LOOP_READY = ("camera: images ", "mode WAITING (no ball yet)")
+#: The controller's line on its first encoder sample: on the rig the loop is closed from then
+#: (its start-up backlog, samples queued while the node set up, is behind it).
+JOINTS_ARRIVING = " is arriving"
 
 
-def _wait_loop_ready(nodes: dict[str, NodeSpec], timeout: float = 180.0) -> None:
+def _wait_loop_ready(nodes: dict[str, NodeSpec], timeout: float = 180.0,
+                     also: tuple[str, ...] = ()) -> None:
     """Wait until the camera and controller have logged that they are up.
 
-    A cold numba cache takes a minute: ``--duration`` counts the time they run. Raises
-    RigError if one dies meanwhile.
+    A cold numba cache takes a minute: ``--duration`` counts the time they run. ``also``:
+    more lines to wait for (on the rig, :data:`JOINTS_ARRIVING`). Raises RigError if one dies
+    meanwhile.
     """
     t0 = time.monotonic()
     logs = [nodes[n] for n in ("loop", "camera", "controller") if n in nodes]
     while time.monotonic() - t0 < timeout:
         text = "".join(n.log_path.read_text(errors="replace") for n in logs
                        if n.log_path is not None and n.log_path.exists())
-        if all(marker in text for marker in LOOP_READY) and CAMERA_MATCHED.search(text):
+        if (all(marker in text for marker in (*LOOP_READY, *also))
+                and CAMERA_MATCHED.search(text)):
             return
         for n in logs:
             if n.returncode is not None:
@@ -846,14 +852,17 @@ def run_hardware(args: argparse.Namespace, log_dir: Path, bag: Path | None
           f"{log_dir}" + (f"; bag {bag}" if bag else ""), flush=True)
     failure: str | None = None
     interrupted = False
+    timed_from: float | None = None  # [s] this computer's clock, the stamps' on the rig
     try:
         for n in order:
             _start(nodes[n], log_dir, env, nice)
-        _wait_loop_ready(nodes)
+        _wait_loop_ready(nodes, also=(JOINTS_ARRIVING,))
         if "recorder" in nodes:
-            _wait_recorder_matched(nodes["recorder"], RECORDER_MATCH_TOPICS, timeout=60.0,
-                                   then="timing the run from now")
-        t_run = time.monotonic()
+            # and the drivers' topics: the run is timed from when the bag gets them all
+            drivers = ("/joint_states", "/" + args.camera_info_topic.lstrip("/"))
+            _wait_recorder_matched(nodes["recorder"], (*RECORDER_MATCH_TOPICS, *drivers),
+                                   timeout=60.0, then="timing the run from now")
+        t_run, timed_from = time.monotonic(), time.time()
         print(f"bfr rig: running for {args.duration:g} s (Ctrl-C stops it sooner)", flush=True)
         while time.monotonic() - t_run < args.duration:
             time.sleep(0.2)
@@ -871,7 +880,10 @@ def run_hardware(args: argparse.Namespace, log_dir: Path, bag: Path | None
                 nodes[n].stop()
     if failure is not None:
         raise RigError(failure)
-    return _bag_summary(bag, "hardware", interrupted, nodes), log_dir, bag, None
+    summary = _bag_summary(bag, "hardware", interrupted, nodes)
+    if summary is not None:
+        summary["timed_from"] = timed_from
+    return summary, log_dir, bag, None
 
 
 def run_rig(args: argparse.Namespace) -> tuple[dict[str, Any] | None, Path, Path | None,
