@@ -136,3 +136,29 @@ def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHar
     text = format_summary(summary)
     assert "on the rig's clock" in text and "simulated" not in text
     assert summary["duration"] < time.time() - t0 + 1.0
+
+
+def test_the_wait_for_the_loop_names_what_did_not_come(tmp_path: Path, capsys) -> None:  # noqa: ANN001
+    """``bfr rig --hardware`` times the run from the controller's first encoder sample; a
+    driver that sends none is named in the note after the wait, and the run goes on."""
+    from bfr_tools.rig import JOINTS_ARRIVING, NodeSpec, _wait_loop_ready  # noqa: PLC0415
+
+    log = tmp_path / "loop.log"
+    up = ("[camera]: camera: images /camera/image_raw, ball radius 16.6 mm\n"
+          "[controller]: controller: ... mode WAITING (no ball yet)\n"
+          "[controller]: /ball_observation: matched 1 publisher(s)\n")
+    log.write_text(up)
+    loop = NodeSpec("loop", "bfr_tools", "loop_node", log_path=log)
+    _wait_loop_ready({"loop": loop}, timeout=0.3)
+    assert capsys.readouterr().out == ""
+    _wait_loop_ready({"loop": loop}, timeout=0.3, also=(JOINTS_ARRIVING,))
+    out = capsys.readouterr().out
+    assert out.strip() == ("bfr rig: note: not within 0.3 s: an encoder sample at the "
+                           "controller (joint_states); timing the run from now"), out
+    log.write_text(up + "[controller]: /joint_states is arriving\n")
+    _wait_loop_ready({"loop": loop}, timeout=0.3, also=(JOINTS_ARRIVING,))
+    assert capsys.readouterr().out == ""
+    log.write_text("")
+    _wait_loop_ready({"loop": loop}, timeout=0.3)
+    out = capsys.readouterr().out
+    assert "the camera node up; the controller node up; the controller matched" in out, out

@@ -811,6 +811,10 @@ LOOP_READY = ("camera: images ", "mode WAITING (no ball yet)")
 #: The controller's line on its first encoder sample: on the rig the loop is closed from then
 #: (its start-up backlog, samples queued while the node set up, is behind it).
 JOINTS_ARRIVING = " is arriving"
+#: Each line waited for, in words (for the note when one is missing).
+_READY_WORDS = {"camera: images ": "the camera node up",
+                "mode WAITING (no ball yet)": "the controller node up",
+                JOINTS_ARRIVING: "an encoder sample at the controller (joint_states)"}
 
 
 def _wait_loop_ready(nodes: dict[str, NodeSpec], timeout: float = 180.0,
@@ -819,22 +823,25 @@ def _wait_loop_ready(nodes: dict[str, NodeSpec], timeout: float = 180.0,
 
     A cold numba cache takes a minute: ``--duration`` counts the time they run. ``also``:
     more lines to wait for (on the rig, :data:`JOINTS_ARRIVING`). Raises RigError if one dies
-    meanwhile.
+    meanwhile; after ``timeout`` seconds, says which lines did not come and goes on.
     """
     t0 = time.monotonic()
     logs = [nodes[n] for n in ("loop", "camera", "controller") if n in nodes]
+    missing: list[str] = []
     while time.monotonic() - t0 < timeout:
         text = "".join(n.log_path.read_text(errors="replace") for n in logs
                        if n.log_path is not None and n.log_path.exists())
-        if (all(marker in text for marker in (*LOOP_READY, *also))
-                and CAMERA_MATCHED.search(text)):
+        missing = [_READY_WORDS.get(m, repr(m)) for m in (*LOOP_READY, *also) if m not in text]
+        if not CAMERA_MATCHED.search(text):
+            missing.append("the controller matched to the camera (ball_observation)")
+        if not missing:
             return
         for n in logs:
             if n.returncode is not None:
                 raise RigError(_death(n))
         time.sleep(0.1)
-    print(f"bfr rig: note: the camera and controller were not up within {timeout:g} s; "
-          f"timing the run from now", flush=True)
+    print(f"bfr rig: note: not within {timeout:g} s: {'; '.join(missing)}; timing the run "
+          f"from now", flush=True)
 
 
 def run_hardware(args: argparse.Namespace, log_dir: Path, bag: Path | None
