@@ -278,19 +278,15 @@ class ControllerNode(Node):
             f"set up in {setup:.2f} s; mode WAITING (no ball yet); {self.scheduling}")
 
     def _warm_up(self) -> None:
-        """Run the core on a synthetic rolling ball, then reset it.
+        """Run the core on a ball rolling along its orbit (:meth:`OrbitalController.warm_up`).
 
-        The compiled kernels (estimator, PFL) load on first use, which takes a noticeable
-        fraction of a second: better here than in the first control steps of a real run.
+        The compiled kernels (estimator, prediction, PFL) load on first use, which takes
+        tens of milliseconds: better here than in the first rolling step of a real run (a
+        warm-up whose ball never rolled had left the pick-up step 25-48 ms long).
         """
-        ctrl = self.ctrl
-        x = ctrl.orbit_state(0.3)
-        pos = ctrl.model.ball_position(x)
-        for k in range(8):
-            t = 0.005 * k
-            ctrl.step(t, float(x[0]) + float(x[2]) * t, float(x[2]),
-                      BallObservation(t, float(pos[0]), float(pos[1]), True), lead=0.002)
-        ctrl.reset()
+        if self.ctrl.warm_up() == 0:
+            self.get_logger().warn("warm-up: the synthetic ball was never picked up; the "
+                                   "first rolling step loads the rolling path's kernels")
 
     # -- inputs ----------------------------------------------------------------------------
     def _parse_joints(self, raw: bytes, now: int) -> tuple[int, float, float] | SampleFault | None:
