@@ -192,6 +192,14 @@ def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
         "-p", "use_sim_time:=true", "-p", "safety.watchdog_timeout:=0.5",
         "-p", "loop.trigger:=joint_states"])
     rig.wait_for_node(ctl)
+    # the start-up backlog: samples the subscription queued while the node set up arrive
+    # stamped up to the queue's length ago; before any good one they are dropped, not a FAULT
+    for _ in range(5):  # the clock reaches the node
+        rig.t_ns += MS
+        rig.clock(rig.t_ns)
+        h.spin_for(0.05)
+    for k in range(3):
+        rig.joint_state(rig.t_ns - NS + k * MS, theta=0.1)
     # a good sample, then one stamped 2 s behind the clock
     for _ in range(20):
         rig.t_ns += MS
@@ -201,6 +209,9 @@ def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
             break
     assert rig.states, ctl.output()[-2000:]
     assert rig.states[-1].mode == WAITING and rig.cmds[-1] == 0.0
+    assert not any(st.mode == FAULT for st in rig.states), ctl.output()[-2000:]
+    assert ("/joint_states is arriving (the first 3 sample(s), queued while the node set up, "
+            "dropped: stamped over safety.max_stamp_age ago)") in ctl.output(), ctl.output()
     rig.t_ns += MS
     rig.clock(rig.t_ns)
     rig.joint_state(rig.t_ns - 2 * NS, theta=0.25)
@@ -258,3 +269,24 @@ def test_every_callback_the_node_registers_puts_an_exception_into_fault() -> Non
             (where, exc)))
         getattr(ControllerNode, name)(bare, *args)
         assert len(seen) == 1 and isinstance(seen[0][1], Exception), (name, seen)
+
+
+def test_controller_node_clock_mismatch_from_the_start(ros_harness: rosutil.RosHarness,
+                                                       node_processes) -> None:  # noqa: ANN001
+    """Every sample stale from the first on (a driver on another clock) is not a start-up
+    backlog: within safety.max_stamp_age of the first one's arrival, FAULT with zero torque."""
+    h = ros_harness
+    rig = Rig(h, [0.0, 0.0, 0.0, 2.0], t0_ns=10 * NS)
+    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
+        "-p", "use_sim_time:=true", "-p", "loop.trigger:=joint_states"])
+    rig.wait_for_node(ctl)
+    for _ in range(100):  # 10 ms of the node's clock a sample, every one 3 s behind it
+        rig.t_ns += 10 * MS
+        rig.clock(rig.t_ns)
+        rig.joint_state(rig.t_ns - 3 * NS)
+        if h.spin_until(lambda: bool(rig.states), timeout=0.05):
+            break
+    assert rig.states and rig.states[-1].mode == FAULT, ctl.output()[-2000:]
+    assert rig.cmds[-1] == 0.0
+    assert "joint_states stamped +3.000 s from the node's clock" in ctl.output()
+    assert "is arriving" not in ctl.output()

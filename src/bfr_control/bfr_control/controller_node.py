@@ -149,6 +149,8 @@ class SampleFault(NamedTuple):
     t_ns: int
     theta: float = math.nan
     theta_dot: float = math.nan
+    #: Stamped further from the node's clock than ``safety.max_stamp_age``.
+    stale: bool = False
 
 
 def guarded(where: str) -> Callable:
@@ -251,6 +253,10 @@ class ControllerNode(Node):
         self.js: tuple[int, float, float] | None = None  # newest good sample
         self.js_clock_ns = self.get_clock().now().nanoseconds  # node clock at its arrival
         self.first_js_ns: int | None = None
+        # the node clock at the first joint_states sample's arrival, and the stale samples
+        # dropped as the start-up backlog (:meth:`_start_backlog`)
+        self.first_arrival_ns: int | None = None
+        self.backlog_dropped = 0
         self.last_step_ns: int | None = None
         self.pending: list[BallObservation] = []
         self.fault = ""  # why the node is in FAULT (empty: not)
@@ -318,7 +324,8 @@ class ControllerNode(Node):
             return SampleFault(
                 f"joint_states stamped {(now - t_ns) / _NS:+.3f} s from the node's clock "
                 f"(> {self.max_age_ns / _NS:g} s): stale data or a clock mismatch "
-                f"(use_sim_time must match the publisher's clock)", t_ns, theta, theta_dot)
+                f"(use_sim_time must match the publisher's clock)", t_ns, theta, theta_dot,
+                stale=True)
         return t_ns, theta, theta_dot
 
     def _on_exception(self, where: str, exc: Exception) -> None:
@@ -357,6 +364,9 @@ class ControllerNode(Node):
         if got is None:
             return
         if isinstance(got, SampleFault):
+            if got.stale and self._start_backlog(now):
+                self.backlog_dropped += 1
+                return
             self._enter_fault(got.why, got.t_ns, got.theta, got.theta_dot)
             return
         self.js_clock_ns = now
@@ -373,7 +383,10 @@ class ControllerNode(Node):
         t_ns = got[0]
         if self.first_js_ns is None:
             self.first_js_ns = t_ns
-            self.get_logger().info(f"{self.js_sub.topic_name} is arriving")
+            dropped = (f" (the first {self.backlog_dropped} sample(s), queued while the node "
+                       f"set up, dropped: stamped over safety.max_stamp_age ago)"
+                       if self.backlog_dropped else "")
+            self.get_logger().info(f"{self.js_sub.topic_name} is arriving{dropped}")
         ref = self.last_step_ns if self.last_step_ns is not None else self.first_js_ns
         if self.trigger == "joint_states":
             self._step()
@@ -383,6 +396,20 @@ class ControllerNode(Node):
             self._step()
         else:
             self.ctrl.estimator.record(t_ns / _NS, got[1], got[2])
+
+    def _start_backlog(self, now: int) -> bool:
+        """Whether a stale sample arriving at ``now`` [ns, node clock] is start-up backlog.
+
+        The subscription queues samples from its creation on, and the node sets up (and, in
+        a composed process, the other nodes set up) before it takes the first: those come
+        oldest first, stamped up to the queue's length ago. Before any sample was good and
+        within ``safety.max_stamp_age`` of the first one's arrival a stale sample is dropped
+        (counted, and said with the "is arriving" line); after that, stale is a FAULT (a
+        clock mismatch never ends within that time).
+        """
+        if self.first_arrival_ns is None:
+            self.first_arrival_ns = now
+        return self.first_js_ns is None and now - self.first_arrival_ns <= self.max_age_ns
 
     def _on_camera_matched(self, status: Any) -> None:
         """Log each change of the camera's publishers matched to ``ball_observation``.
@@ -579,8 +606,11 @@ class ControllerNode(Node):
         gap = (now - self.js_clock_ns) / _NS
         if self.first_js_ns is None:  # not armed before the first sample
             if gap > 5.0 and not self.fault:
+                dropped = (f" ({self.backlog_dropped} stale sample(s) dropped as start-up "
+                           f"backlog)" if self.backlog_dropped else "")
                 self.get_logger().warn(f"no joint_states received yet on "
-                                       f"{self.js_sub.topic_name}", throttle_duration_sec=10.0)
+                                       f"{self.js_sub.topic_name}{dropped}",
+                                       throttle_duration_sec=10.0)
             return
         if gap > self.watchdog_timeout:  # stamped now: the check is the measurement
             self._enter_fault(f"no {self.js_sub.topic_name} for {gap:.2f} s of the node's "
