@@ -7,27 +7,33 @@ and the resulting accelerations are compared with the compiled kernel at random 
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 import sympy as sp
 from bfr_model.dynamics import RigidModel
 from bfr_model.params import load_params
 
+#: Derivatives of the contour rho(phi) the equations need: up to the fourth (the mass
+#: matrix holds rho''', the rest of the equations rho'''').
+_ORDERS = 5
 
-def _derive(params):  # noqa: ANN001, ANN202
-    """Lambdified M(q), rest(q, q_dot) with M q_ddot + rest = Q, and F_n's pieces."""
+
+@functools.cache
+def _derive_general():  # noqa: ANN202
+    """The equations for any contour rho(phi) and any constants, lambdified once.
+
+    rho is an undefined function of phi while sympy differentiates the Lagrangian (the
+    expressions stay small); its value and derivatives, and the constants, are arguments
+    of the lambdified function: ``f(theta, phi, theta_dot, phi_dot, rho_0, ..., rho_4,
+    R, m, J_b, J_f, g, m_f e, theta_e)`` with ``rho_k`` the k-th derivative.
+    """
     th, ph, thd, phd = sp.symbols("theta phi theta_dot phi_dot", real=True)
-    c = params.frame.contour
-    t = params.track
-    rho = c.a - c.b * sp.cos(2 * ph)
-    for k, ck, sk in zip(c.harmonic_orders, c.harmonic_cos, c.harmonic_sin, strict=True):
-        rho += ck * sp.cos(k * ph) + sk * sp.sin(k * ph)
-    for b0, h, w in zip(t.bump_phi, t.bump_height, t.bump_width, strict=True):
-        rho += h * sp.exp(-((ph - b0) ** 2) / (2 * w**2))  # bumps away from the wrap point
-    R = params.ball.rolling_radius
-    m, jb, jf = params.ball.mass, params.ball.inertia, params.frame.inertia
-    g = params.environment.in_plane_gravity
-    delta = sp.Matrix([rho * sp.sin(ph), rho * sp.cos(ph)])
+    R, m, jb, jf, g, me, th_e = sp.symbols("R m J_b J_f g m_f_e theta_e", real=True)
+    rho_f = sp.Function("rho")(ph)
+    rho_k = sp.symbols(f"rho0:{_ORDERS}", real=True)
+    delta = sp.Matrix([rho_f * sp.sin(ph), rho_f * sp.cos(ph)])
     d1 = delta.diff(ph)
     tang = d1 / sp.sqrt(d1.dot(d1))
     normal = sp.Matrix([-tang[1], tang[0]])
@@ -41,7 +47,6 @@ def _derive(params):  # noqa: ANN001, ANN202
     omega_b = thd - s_dot / R
     T = sp.Rational(1, 2) * (m * r_dot.dot(r_dot) + jb * omega_b**2 + jf * thd**2)
     # the frame's centre of mass at e [sin theta_e, cos theta_e] in frame coordinates
-    me, th_e = params.frame.imbalance, params.frame.imbalance_angle
     com = rot * sp.Matrix([me * sp.sin(th_e), me * sp.cos(th_e)])
     V = m * g * r[1] + g * com[1]
     L = T - V
@@ -50,8 +55,35 @@ def _derive(params):  # noqa: ANN001, ANN202
         sum(sp.diff(L, qd[i], q[j]) * qd[j] for j in range(2)) - sp.diff(L, q[i])
         for i in range(2)])
     nw = rot * normal
-    f = sp.lambdify((th, ph, thd, phd), [M, rest, r, nw, r.diff(th), r.diff(ph)], "numpy",
-                    cse=True)
+    out = [M, rest, r, nw, r.diff(th), r.diff(ph)]
+    # rho and its derivatives -> plain symbols, the highest order first
+    subs = [(sp.Derivative(rho_f, (ph, k)), rho_k[k]) for k in range(_ORDERS - 1, 0, -1)]
+    out = [e.subs(subs).subs(rho_f, rho_k[0]) for e in out]
+    assert not any(e.has(rho_f) for e in out), "a derivative of rho beyond _ORDERS - 1"
+    return sp.lambdify((th, ph, thd, phd, *rho_k, R, m, jb, jf, g, me, th_e), out, "numpy",
+                       cse=True)
+
+
+def _derive(params):  # noqa: ANN001, ANN202
+    """Lambdified M(q), rest(q, q_dot) with M q_ddot + rest = Q, and F_n's pieces."""
+    ph = sp.symbols("phi", real=True)
+    c = params.frame.contour
+    t = params.track
+    rho = c.a - c.b * sp.cos(2 * ph)
+    for k, ck, sk in zip(c.harmonic_orders, c.harmonic_cos, c.harmonic_sin, strict=True):
+        rho += ck * sp.cos(k * ph) + sk * sp.sin(k * ph)
+    for b0, h, w in zip(t.bump_phi, t.bump_height, t.bump_width, strict=True):
+        rho += h * sp.exp(-((ph - b0) ** 2) / (2 * w**2))  # bumps away from the wrap point
+    contour = sp.lambdify(ph, [rho.diff(ph, k) if k else rho for k in range(_ORDERS)],
+                          "numpy")
+    consts = (params.ball.rolling_radius, params.ball.mass, params.ball.inertia,
+              params.frame.inertia, params.environment.in_plane_gravity,
+              params.frame.imbalance, params.frame.imbalance_angle)
+    general = _derive_general()
+
+    def f(th: float, ph: float, thd: float, phd: float) -> list:
+        return general(th, ph, thd, phd, *(float(v) for v in contour(ph)), *consts)
+
     return f
 
 
