@@ -119,7 +119,14 @@ def test_camera_node_tracks_rendered_ball(ros_harness: rosutil.RosHarness,
             rig.joint_state(t + j * 1_000_000, theta + 2.4 * j * 1e-3, 2.4)
         img, centre = rig.render(theta, phi)
         h.spin_for(0.005)
-        rig.image(t, img)
+        # every third frame as a colour camera's raw mosaic (a grey scene: every photosite
+        # the same value), every third as a USB camera's 4:2:2 YUV (UYVY, neutral chroma)
+        if k % 3 == 1:
+            rig.image(t, img, encoding="bayer_rggb8")
+        elif k % 3 == 2:
+            rig.image(t, np.stack([np.full_like(img, 128), img], axis=-1), encoding="yuv422")
+        else:
+            rig.image(t, img)
         o = rig.wait_obs(t, cam)
         assert o.status == BallObservation.FOUND and o.valid, o
         errors.append(math.hypot(o.x - centre[0], o.y - centre[1]))
@@ -142,7 +149,7 @@ def test_camera_node_tracks_rendered_ball(ros_harness: rosutil.RosHarness,
         rig.image(t_ns, *args, **kwargs)  # type: ignore[arg-type]
         return rig.wait_obs(t_ns, cam)
 
-    o = bad(t + 1, img, encoding="yuv422")
+    o = bad(t + 1, img, encoding="nv21")
     assert (o.status, o.valid) == (BallObservation.INVALID_INPUT, False) and math.isnan(o.x)
     o = bad(t + 2, np.zeros((240, 320), np.uint8))
     assert o.status == BallObservation.INVALID_INPUT
@@ -170,7 +177,7 @@ def test_camera_node_tracks_rendered_ball(ros_harness: rosutil.RosHarness,
     o = bad(8 * NS, img)
     assert o.valid
     out = cam.output()
-    for text in ("unsupported image encoding 'yuv422'",
+    for text in ("unsupported image encoding 'nv21'",
                  "image is 320x240 but the camera calibration is 640x480",
                  "image data has 1000 B",
                  "theta must be finite",

@@ -95,6 +95,32 @@ def test_image_to_array_encodings() -> None:
     assert err == "" and np.array_equal(got, f)
 
 
+def test_image_to_array_bayer_and_yuv() -> None:
+    """A Bayer mosaic is demosaiced to grey with ROS's pattern names (a pure red scene is
+    red's share of grey, 0.299, only if R sits where the encoding says); 4:2:2 YUV gives its
+    luma exactly, from the second byte of each pair (UYVY) or the first (YUYV)."""
+    red = np.zeros((8, 10), np.uint8)  # bayer_rggb8: R at even rows and even columns
+    red[0::2, 0::2] = 200
+    for enc, where in (("bayer_rggb8", (0, 0)), ("bayer_bggr8", (1, 1)),
+                       ("bayer_grbg8", (0, 1)), ("bayer_gbrg8", (1, 0))):
+        mosaic = np.zeros((8, 10), np.uint8)
+        mosaic[where[0]::2, where[1]::2] = 200  # the R photosites of this pattern
+        got, err = image_to_array(_img(mosaic, enc))
+        assert err == "" and got.shape == (8, 10) and got.dtype == np.uint8, (enc, err)
+        assert np.all(np.abs(got[2:-2, 2:-2].astype(int) - round(0.299 * 200)) <= 1), (enc, got)
+    grey = np.full((6, 8), 40000, np.uint16)
+    got, err = image_to_array(_img(grey, "bayer_gbrg16"))
+    assert err == "" and got.dtype == np.uint16 and np.all(got == 40000)
+    rng = np.random.default_rng(1)
+    luma = rng.integers(0, 255, (4, 6), dtype=np.uint8)
+    chroma = rng.integers(0, 255, (4, 6), dtype=np.uint8)
+    for enc, pair in (("yuv422", (chroma, luma)), ("yuv422_yuy2", (luma, chroma))):
+        got, err = image_to_array(_img(np.stack(pair, axis=-1), enc))
+        assert err == "" and np.array_equal(got, luma), enc
+    _, err = image_to_array(_img(luma, "nv21"))
+    assert err.startswith("unsupported image encoding 'nv21' (supported: mono8") and "bayer" in err
+
+
 def test_image_to_array_padded_rows() -> None:
     a = np.arange(12, dtype=np.uint8).reshape(3, 4)
     padded = np.zeros((3, 8), np.uint8)
@@ -106,7 +132,7 @@ def test_image_to_array_padded_rows() -> None:
 
 
 @pytest.mark.parametrize(("change", "match"), [
-    ({"encoding": "yuv422"}, "unsupported image encoding"),
+    ({"encoding": "nv21"}, "unsupported image encoding"),
     ({"data": b"\0" * 10}, "image data has 10 B"),
     ({"step": 2}, "smaller than width"),
     ({"height": 0}, "empty image"),

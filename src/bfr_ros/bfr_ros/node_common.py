@@ -336,14 +336,30 @@ _ENCODINGS = {
     "32fc1": (np.float32, 1),
     "bgr8": (np.uint8, 3), "rgb8": (np.uint8, 3), "8uc3": (np.uint8, 3),
     "bgra8": (np.uint8, 4), "rgba8": (np.uint8, 4),
+    # a colour camera's raw mosaic, 8 or 16 bits a photosite (returned as grey, demosaiced)
+    **{f"bayer_{p}{b}": (np.uint8 if b == 8 else np.uint16, 1)
+       for p in ("rggb", "bggr", "gbrg", "grbg") for b in (8, 16)},
+    # 4:2:2 YUV (a USB camera's): two bytes a pixel, returned as its luma (grey)
+    "yuv422": (np.uint8, 2), "uyvy": (np.uint8, 2),
+    "yuv422_yuy2": (np.uint8, 2), "yuyv": (np.uint8, 2),
 }
+#: OpenCV's Bayer-to-grey code of each ROS mosaic (cv_bridge's mapping: OpenCV names the
+#: pattern from the second row's second pixel, ROS from the first row's first).
+_BAYER_TO_GREY = {"rggb": "COLOR_BayerBG2GRAY", "bggr": "COLOR_BayerRG2GRAY",
+                  "gbrg": "COLOR_BayerGR2GRAY", "grbg": "COLOR_BayerGB2GRAY"}
+#: Where the luma is in each pair of bytes of 4:2:2 YUV (UYVY: second, YUYV: first).
+_YUV_LUMA = {"yuv422": 1, "uyvy": 1, "yuv422_yuy2": 0, "yuyv": 0}
+_SUPPORTED = ("mono8, mono16, 8UC1, 16UC1, 32FC1, bgr8, rgb8, bgra8, rgba8, "
+              "bayer_{rggb,bggr,gbrg,grbg}{8,16}, yuv422 (UYVY), yuv422_yuy2 (YUYV)")
 
 
 def image_to_array(msg: Any) -> tuple[np.ndarray | None, str]:
     """Convert a ``sensor_msgs/Image`` to an array without copying when possible.
 
     Supported encodings: mono8, mono16, 8UC1, 16UC1, 32FC1, bgr8, rgb8, bgra8, rgba8
-    (colour images are returned in BGR(A) order, as OpenCV expects).
+    (colour images are returned in BGR(A) order, as OpenCV expects); the Bayer mosaics
+    ``bayer_rggb8`` ... ``bayer_grbg16`` (demosaiced by OpenCV straight to grey, copied) and
+    4:2:2 YUV ``yuv422`` (UYVY) and ``yuv422_yuy2`` (YUYV) (their luma: grey, a view).
 
     Returns
     -------
@@ -353,8 +369,7 @@ def image_to_array(msg: Any) -> tuple[np.ndarray | None, str]:
     """
     enc = str(msg.encoding).lower()
     if enc not in _ENCODINGS:
-        return None, (f"unsupported image encoding {msg.encoding!r} (supported: mono8, "
-                      "mono16, 32FC1, bgr8, rgb8, bgra8, rgba8)")
+        return None, f"unsupported image encoding {msg.encoding!r} (supported: {_SUPPORTED})"
     dtype, ch = _ENCODINGS[enc]
     h, w, step = int(msg.height), int(msg.width), int(msg.step)
     item = np.dtype(dtype).itemsize
@@ -371,6 +386,13 @@ def image_to_array(msg: Any) -> tuple[np.ndarray | None, str]:
     arr = arr.reshape(h, w, ch) if ch > 1 else arr.reshape(h, w)
     if item > 1 and bool(msg.is_bigendian) != (sys.byteorder == "big"):
         arr = arr.astype(arr.dtype.newbyteorder("="))
+    if enc in _YUV_LUMA:
+        return arr[:, :, _YUV_LUMA[enc]], ""
+    if enc.startswith("bayer_"):
+        import cv2  # noqa: PLC0415 - only colour images need it; the other nodes never load it
+
+        code = getattr(cv2, _BAYER_TO_GREY[enc[6:10]])
+        return cv2.cvtColor(np.ascontiguousarray(arr), code), ""
     if enc in ("rgb8", "rgba8"):
         import cv2  # noqa: PLC0415 - only colour images need it; the other nodes never load it
 
