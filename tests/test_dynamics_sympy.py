@@ -15,9 +15,9 @@ import sympy as sp
 from bfr_model.dynamics import RigidModel
 from bfr_model.params import load_params
 
-#: Derivatives of the contour rho(phi) the equations need: up to the fourth (the mass
-#: matrix holds rho''', the rest of the equations rho'''').
-_ORDERS = 5
+#: Derivatives of the contour rho(phi) the equations need: up to the third (the contact
+#: normal holds rho', the kinetic energy and the mass matrix rho'', the rest rho''').
+_ORDERS = 4
 
 
 @functools.cache
@@ -26,7 +26,7 @@ def _derive_general():  # noqa: ANN202
 
     rho is an undefined function of phi while sympy differentiates the Lagrangian (the
     expressions stay small); its value and derivatives, and the constants, are arguments
-    of the lambdified function: ``f(theta, phi, theta_dot, phi_dot, rho_0, ..., rho_4,
+    of the lambdified function: ``f(theta, phi, theta_dot, phi_dot, rho_0, ..., rho_3,
     R, m, J_b, J_f, g, m_f e, theta_e)`` with ``rho_k`` the k-th derivative.
     """
     th, ph, thd, phd = sp.symbols("theta phi theta_dot phi_dot", real=True)
@@ -59,7 +59,8 @@ def _derive_general():  # noqa: ANN202
     # rho and its derivatives -> plain symbols, the highest order first
     subs = [(sp.Derivative(rho_f, (ph, k)), rho_k[k]) for k in range(_ORDERS - 1, 0, -1)]
     out = [e.subs(subs).subs(rho_f, rho_k[0]) for e in out]
-    assert not any(e.has(rho_f) for e in out), "a derivative of rho beyond _ORDERS - 1"
+    # a derivative beyond _ORDERS - 1 would be left as one (of rho_{_ORDERS - 1})
+    assert not any(e.has(rho_f) or e.has(sp.Derivative) for e in out), "raise _ORDERS"
     return sp.lambdify((th, ph, thd, phd, *rho_k, R, m, jb, jf, g, me, th_e), out, "numpy",
                        cse=True)
 

@@ -26,10 +26,13 @@ from bfr_model.param_file import config_path
 pytestmark = pytest.mark.slow
 
 STANDIN = Path(__file__).resolve().parent / "hardware_standin.py"
+_HW = yaml.safe_load(config_path("bfr_control", "hardware.yaml").read_text())
 #: The controller's watchdog on the rig [s]: no encoder sample this long is a fault. The loop
 #: must never leave the plant unanswered for half of it.
-WATCHDOG_S = float(yaml.safe_load(config_path("bfr_control", "hardware.yaml").read_text())
-                   ["controller"]["ros__parameters"]["safety"]["watchdog_timeout"])
+WATCHDOG_S = float(_HW["controller"]["ros__parameters"]["safety"]["watchdog_timeout"])
+#: No valid camera fix this long while rolling is a lost ball [s]: the camera must never
+#: leave its images unmeasured for half of it.
+LOST_S = float(_HW["controller"]["ros__parameters"]["supervisor"]["lost_timeout"])
 
 
 def header_stamps(bag: str, topic: str) -> np.ndarray:
@@ -58,7 +61,8 @@ def answered(bag: str, inputs: str, answers: str, since: float, duration: float
     tuple of float
         The share of the inputs answered, and the longest time [s] from an answered input to
         a recorded input still unanswered (the longest the loop left the plant's news
-        unanswered; a pause of the inputs themselves is not counted).
+        unanswered; a pause of the inputs themselves counts only when the first input after
+        it goes unanswered).
     """
     x, y = np.sort(header_stamps(bag, inputs)), np.sort(header_stamps(bag, answers))
     assert x.size and y.size, (inputs, x.size, answers, y.size)
@@ -112,15 +116,16 @@ def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHar
     # state, and none waited half the controller's watchdog for one (not every sample: a
     # best-effort subscription drops some on a loaded machine, which a control loop may; a
     # loop that stops answering may not). The camera likewise measured its images (an
-    # observation carries its image's stamp; images are best effort)
+    # observation carries its image's stamp; images are best effort), none left for half
+    # the time after which the controller calls a rolling ball lost
     bag, since = summary["bag"], summary["timed_from"]
     share, gap = answered(bag, "/joint_states", "/controller_state", since, duration)
     print(f"controller answered {share:.1%} of the samples, longest unanswered {gap * 1e3:.1f} ms")
-    assert share > 0.5 and gap < WATCHDOG_S / 2, (share, gap)
+    assert share > 0.8 and gap < WATCHDOG_S / 2, (share, gap)
     share, gap = answered(bag, "/camera/camera_info", "/ball_observation", since,
                           duration)
     print(f"camera measured {share:.1%} of the images, longest unmeasured {gap * 1e3:.1f} ms")
-    assert share > 0.5 and gap < WATCHDOG_S / 2, (share, gap)
+    assert share > 0.5 and gap < LOST_S / 2, (share, gap)
     published = summary["published"]
     assert 0 < topics["/controller_state"]["count"] <= published["/controller_state"]
     loop_log = (log_dir / "loop.log").read_text()

@@ -2,7 +2,8 @@
 
 A thin node over :class:`bfr_camera.detector.BallDetector`:
 
-- subscribes ``camera/image_raw`` (``sensor_msgs/Image``; mono8, mono16, 32FC1 or colour),
+- subscribes ``camera/image_raw`` (``sensor_msgs/Image``; mono8, mono16, 32FC1, colour, a
+  raw Bayer mosaic or 4:2:2 YUV: :func:`bfr_ros.node_common.image_to_array`),
   ``camera/camera_info`` (the intrinsics: size, K, D, distortion model) and
   ``joint_states`` (the frame angle theta, interpolated at each frame's exposure mid-time
   from a short buffer, for the observation's ``phi = theta + atan2(x, y)``; the samples are

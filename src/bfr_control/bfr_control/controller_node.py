@@ -30,7 +30,9 @@ Safety, in the node whatever the core does:
   time under ``use_sim_time``: dead driver or simulator), non-finite or malformed samples,
   or samples stamped more than ``safety.max_stamp_age`` away from the node's clock: zero
   torque, mode FAULT, an error log; the controller starts afresh (WAITING) when good
-  samples return;
+  samples return (but samples older than that before the first good one, within
+  ``max_stamp_age`` of steady time from the first of them, are the start-up backlog the
+  subscription queued while the node set up: dropped, counted in the "is arriving" line);
 - an exception in any callback (a bug, or input no check foresaw) never ends the node: it
   puts the controller in FAULT with zero torque, logged once with its reason (exception
   type, message and where), and the controller restarts in WAITING at the next step that
@@ -138,7 +140,7 @@ def node_defaults() -> dict[str, Any]:
 
 
 class SampleFault(NamedTuple):
-    """A joint_states sample that puts the controller in FAULT, and what it said.
+    """A joint_states sample that puts the controller in FAULT (but see ``stale``), and why.
 
     ``t_ns`` is the sample's stamp (the measurement's time: the FAULT state is stamped with
     it), or the node's clock at its arrival when the message cannot be read; ``theta`` and
@@ -149,7 +151,8 @@ class SampleFault(NamedTuple):
     t_ns: int
     theta: float = math.nan
     theta_dot: float = math.nan
-    #: Stamped further from the node's clock than ``safety.max_stamp_age``.
+    #: Stamped more than ``safety.max_stamp_age`` before the node's clock (not after it):
+    #: start-up backlog before the first good sample (:meth:`ControllerNode._start_backlog`).
     stale: bool = False
 
 
@@ -253,9 +256,9 @@ class ControllerNode(Node):
         self.js: tuple[int, float, float] | None = None  # newest good sample
         self.js_clock_ns = self.get_clock().now().nanoseconds  # node clock at its arrival
         self.first_js_ns: int | None = None
-        # the node clock at the first joint_states sample's arrival, and the stale samples
-        # dropped as the start-up backlog (:meth:`_start_backlog`)
-        self.first_arrival_ns: int | None = None
+        # the steady clock at the first stale sample's arrival before any good one, and the
+        # stale samples dropped as the start-up backlog (:meth:`_start_backlog`)
+        self.first_stale_ns: int | None = None
         self.backlog_dropped = 0
         self.last_step_ns: int | None = None
         self.pending: list[BallObservation] = []
@@ -325,7 +328,7 @@ class ControllerNode(Node):
                 f"joint_states stamped {(now - t_ns) / _NS:+.3f} s from the node's clock "
                 f"(> {self.max_age_ns / _NS:g} s): stale data or a clock mismatch "
                 f"(use_sim_time must match the publisher's clock)", t_ns, theta, theta_dot,
-                stale=True)
+                stale=now - t_ns > self.max_age_ns)
         return t_ns, theta, theta_dot
 
     def _on_exception(self, where: str, exc: Exception) -> None:
@@ -364,7 +367,7 @@ class ControllerNode(Node):
         if got is None:
             return
         if isinstance(got, SampleFault):
-            if got.stale and self._start_backlog(now):
+            if got.stale and self._start_backlog():
                 self.backlog_dropped += 1
                 return
             self._enter_fault(got.why, got.t_ns, got.theta, got.theta_dot)
@@ -397,19 +400,21 @@ class ControllerNode(Node):
         else:
             self.ctrl.estimator.record(t_ns / _NS, got[1], got[2])
 
-    def _start_backlog(self, now: int) -> bool:
-        """Whether a stale sample arriving at ``now`` [ns, node clock] is start-up backlog.
+    def _start_backlog(self) -> bool:
+        """Whether a stale sample (stamped too long ago) arriving now is start-up backlog.
 
         The subscription queues samples from its creation on, and the node sets up (and, in
         a composed process, the other nodes set up) before it takes the first: those come
         oldest first, stamped up to the queue's length ago. Before any sample was good and
-        within ``safety.max_stamp_age`` of the first one's arrival a stale sample is dropped
-        (counted, and said with the "is arriving" line); after that, stale is a FAULT (a
-        clock mismatch never ends within that time).
+        within ``safety.max_stamp_age`` of steady (wall) time from the first stale one's
+        arrival (the backlog is drained in real time, whatever a simulation's clock does) a
+        stale sample is dropped (counted, and said with the "is arriving" line); after that,
+        stale is a FAULT (a clock mismatch never ends within that time).
         """
-        if self.first_arrival_ns is None:
-            self.first_arrival_ns = now
-        return self.first_js_ns is None and now - self.first_arrival_ns <= self.max_age_ns
+        now = time.monotonic_ns()
+        if self.first_stale_ns is None:
+            self.first_stale_ns = now
+        return self.first_js_ns is None and now - self.first_stale_ns <= self.max_age_ns
 
     def _on_camera_matched(self, status: Any) -> None:
         """Log each change of the camera's publishers matched to ``ball_observation``.

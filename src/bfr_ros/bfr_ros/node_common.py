@@ -349,8 +349,8 @@ _BAYER_TO_GREY = {"rggb": "COLOR_BayerBG2GRAY", "bggr": "COLOR_BayerRG2GRAY",
                   "gbrg": "COLOR_BayerGR2GRAY", "grbg": "COLOR_BayerGB2GRAY"}
 #: Where the luma is in each pair of bytes of 4:2:2 YUV (UYVY: second, YUYV: first).
 _YUV_LUMA = {"yuv422": 1, "uyvy": 1, "yuv422_yuy2": 0, "yuyv": 0}
-_SUPPORTED = ("mono8, mono16, 8UC1, 16UC1, 32FC1, bgr8, rgb8, bgra8, rgba8, "
-              "bayer_{rggb,bggr,gbrg,grbg}{8,16}, yuv422 (UYVY), yuv422_yuy2 (YUYV)")
+_SUPPORTED = ("mono8, mono16, 8UC1, 16UC1, 32FC1, bgr8, rgb8, 8UC3, bgra8, rgba8, "
+              "bayer_{rggb,bggr,gbrg,grbg}{8,16}, yuv422 or uyvy, yuv422_yuy2 or yuyv")
 
 
 def image_to_array(msg: Any) -> tuple[np.ndarray | None, str]:
