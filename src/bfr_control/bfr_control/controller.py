@@ -434,7 +434,7 @@ class OrbitalController:
         return self.orbit.state(phi)
 
     def warm_up(self, steps: int = 12, dt: float = 0.005, lead: float = 0.002) -> int:
-        """Run the loop on a ball rolling along the orbit, then :meth:`reset`.
+        """:meth:`reset`, run the loop on a ball rolling along the orbit, :meth:`reset` again.
 
         Every path of :meth:`step` a run takes (the estimator, the pick-up, the prediction
         over ``lead`` and the PFL law) calls compiled kernels that load on their first call,
@@ -448,6 +448,7 @@ class OrbitalController:
         int
             Steps that ran ROLLING (0 would leave the rolling path cold).
         """
+        self.reset()  # the synthetic run starts at t = 0, whatever ran before
         phi, rolled = 0.3, 0
         for k in range(steps):
             t = dt * k
