@@ -86,6 +86,54 @@ def test_pixel_to_world_plane_round_trip_with_distortion() -> None:
     np.testing.assert_allclose(back, pts, atol=1e-9)
 
 
+FISHEYE = dict(distortion_model="equidistant", d=(-0.02, 0.004, -0.001, 0.0002),
+               k=(300.0, 0.0, 321.0, 0.0, 302.0, 238.0, 0.0, 0.0, 1.0))
+
+
+def test_fisheye_camera_matches_the_equidistant_closed_form_and_round_trips() -> None:
+    """ROS's ``equidistant`` (OpenCV's cv2.fisheye): theta = atan r, theta_d = theta (1 + k1
+    theta^2 + ... + k4 theta^8), pixel = K (theta_d / r) (x, y), written out here by hand; and
+    pixel -> plane -> pixel round trips over the whole image, wide angles included."""
+    eye = (0.05, -0.04, 0.25)  # close: the frame fills a wide angle
+    cam = CameraModel(position=eye, orientation=look_at(eye, (0.0, 0.0, 0.0)), **FISHEYE)
+    assert cam.has_distortion and cam.fisheye
+    pts = np.random.default_rng(2).uniform(-0.18, 0.18, (30, 3)) * [1, 1, 0.05]
+    xc = (cam.R_cw @ (pts - np.array(eye)).T).T
+    x, y = xc[:, 0] / xc[:, 2], xc[:, 1] / xc[:, 2]
+    r = np.hypot(x, y)
+    th = np.arctan(r)
+    k1, k2, k3, k4 = FISHEYE["d"]
+    thd = th * (1 + k1 * th**2 + k2 * th**4 + k3 * th**6 + k4 * th**8)
+    hand = np.stack([300.0 * thd / r * x + 321.0, 302.0 * thd / r * y + 238.0], axis=1)
+    assert th.max() > 0.6  # rays 35 deg and more off the axis
+    np.testing.assert_allclose(cam.project(pts), hand, atol=1e-9)
+    u, v = np.meshgrid(np.linspace(0, 639, 17), np.linspace(0, 479, 13))
+    px = np.stack([u, v], axis=-1)
+    world = cam.pixel_to_plane(px, z=0.0)
+    ok = np.isfinite(world[..., 0])
+    assert ok.mean() > 0.9
+    np.testing.assert_allclose(cam.project(world[ok]), px[ok], atol=1e-6)
+    # all coefficients zero is still a fisheye (r_d = theta), not the pinhole (r_d = tan theta)
+    plain = cam.replace(d=(0.0, 0.0, 0.0, 0.0))
+    assert plain.has_distortion
+    pin = CameraModel(position=eye, orientation=cam.orientation, k=FISHEYE["k"])
+    assert np.abs(plain.project(pts) - pin.project(pts)).max() > 10.0
+    # from and back to a CameraInfo as a ROS driver publishes it
+    back = CameraModel.from_camera_info(cam.to_camera_info(), position=eye,
+                                        orientation=cam.orientation)
+    assert back.distortion_model == "equidistant" and back.d == cam.d
+    np.testing.assert_allclose(back.project(pts), hand, atol=1e-9)
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    ({"d": (0.1, 0.0, 0.0)}, "equidistant takes \\(4,\\) coefficients, got 3"),
+    ({"k": (300.0, 0.5, 321.0, 0.0, 302.0, 238.0, 0.0, 0.0, 1.0)}, "takes no skew"),
+])
+def test_fisheye_camera_rejects(change: dict, match: str) -> None:
+    with pytest.raises(CameraModelError, match=match):
+        CameraModel(**{**FISHEYE, **change})
+
+
 def test_pixel_to_plane_without_intersection_is_nan() -> None:
     cam = CameraModel()
     assert np.all(np.isnan(cam.pixel_to_plane(np.array([100.0, 100.0]), z=1.0)))  # behind
@@ -145,7 +193,7 @@ def test_parameter_file_round_trip(tmp_path) -> None:  # noqa: ANN001
     ({"k": (0.0, 0, 319.5, 0, 600.0, 239.5, 0, 0, 1)}, "fx, fy > 0"),
     ({"k": (600.0, 0, 319.5)}, "expected 9 numbers"),
     ({"d": (0.1, 0.2, 0.3)}, "takes"),
-    ({"distortion_model": "equidistant"}, "not supported"),
+    ({"distortion_model": "kannala_brandt"}, "not supported"),
     ({"orientation": (1.0, 1.0, 0.0, 0.0)}, "unit norm"),
     ({"width": -640}, "positive integer"),
     ({"exposure_time": 0.01}, "exposure_time"),

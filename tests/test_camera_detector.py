@@ -87,6 +87,21 @@ def test_round_trip_with_lens_distortion_and_a_tilted_camera(scene) -> None:  # 
     assert err.max() < 0.5
 
 
+def test_round_trip_through_a_fisheye_lens(scene) -> None:  # noqa: ANN001
+    """A wide-angle camera close to the frame with a fisheye lens (ROS ``equidistant``): the
+    renderer draws through cv2.fisheye, the detector undistorts through it, and the ball's
+    position comes back as accurately as through a pinhole."""
+    from bfr_camera.calibration import look_at  # noqa: PLC0415
+
+    eye = (0.03, -0.02, 0.3)
+    cam = CameraModel(distortion_model="equidistant", d=(-0.02, 0.004, -0.001, 0.0002),
+                      k=(330.0, 0.0, 321.0, 0.0, 331.0, 238.0, 0.0, 0.0, 1.0), position=eye,
+                      orientation=look_at(eye, (0.0, 0.0, 0.0)))
+    err = _errors(scene, RenderOptions(plate_z=scene.plate_z, exposure_time=0.0), 15, 5, cam)
+    assert np.median(err) < 0.1
+    assert err.max() < 0.5
+
+
 def test_world_position_and_phi_convention() -> None:
     # a flat disc straight above the axis at theta = 0.3: phi = theta + atan2(x, y) = 0.3
     r_b = 16.6e-3

@@ -16,7 +16,8 @@ camera coordinates
 
     X_c = R_cw (X_w - c),        R_cw = R_wc^T.
 
-Pinhole model with lens distortion (OpenCV / ROS ``plumb_bob`` and ``rational_polynomial``)
+Pinhole model with lens distortion (OpenCV / ROS ``plumb_bob``, ``rational_polynomial``,
+``equidistant``)
 ----------------------------------------------------------------------------------------
 Normalised coordinates ``x = X_c / Z_c``, ``y = Y_c / Z_c``, ``r^2 = x^2 + y^2``,
 
@@ -25,11 +26,18 @@ Normalised coordinates ``x = X_c / Z_c``, ``y = Y_c / Z_c``, ``r^2 = x^2 + y^2``
     y_d = y (...) / (...) + p1 (r^2 + 2 y^2) + 2 p2 x y
     u = fx x_d + s y_d + cx,   v = fy y_d + cy,        K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]
 
-with ``D = (k1, k2, p1, p2, k3[, k4, k5, k6])``. Pixel centres sit at integer coordinates
-(OpenCV and ROS convention): the image centre of a W x H image is ((W-1)/2, (H-1)/2).
+with ``D = (k1, k2, p1, p2, k3[, k4, k5, k6])``. A fisheye lens (ROS ``equidistant``,
+OpenCV's :mod:`cv2.fisheye`, ``D = (k1, k2, k3, k4)``, no skew) maps the ray's angle from the
+optical axis ``theta = atan r`` instead:
+
+    theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8),
+    (x_d, y_d) = (theta_d / r) (x, y),   u = fx x_d + cx,   v = fy y_d + cy.
+
+Pixel centres sit at integer coordinates (OpenCV and ROS convention): the image centre of a
+W x H image is ((W-1)/2, (H-1)/2).
 
 Pixel -> world (the ball centre lies in a known plane ``z = z0``): undistort the pixel to
-``(x, y)`` (iteratively, :func:`cv2.undistortPoints`), form the viewing ray
+``(x, y)`` (iteratively, :func:`cv2.undistortPoints` or its fisheye twin), form the viewing ray
 ``d_w = R_wc [x, y, 1]^T`` from the optical centre ``c``, and intersect it with the plane:
 
     X_w = c + lambda d_w,       lambda = (z0 - c_z) / d_{w,z}   (> 0, else no intersection).
@@ -80,6 +88,10 @@ FloatArray = NDArray[np.float64]
 DISTORTION_MODELS: dict[str, tuple[int, ...]] = {
     "plumb_bob": (0, 4, 5),
     "rational_polynomial": (8, 12, 14),
+    # a fisheye lens (ROS camera_calibration --fisheye, OpenCV's cv2.fisheye): k1..k4 of
+    # theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8), theta the
+    # angle of the ray from the optical axis, r_d = theta_d in normalised units
+    "equidistant": (4,),
 }
 
 #: Termination of the iterative undistortion: enough iterations for 1e-9 px round trips.
@@ -219,7 +231,8 @@ class CameraModel:
     d : tuple of float
         Distortion coefficients D [-] in OpenCV/ROS order (0, 4, 5, 8, 12 or 14 of them).
     distortion_model : str
-        ``"plumb_bob"`` (up to 5 coefficients) or ``"rational_polynomial"``.
+        ``"plumb_bob"`` (up to 5 coefficients), ``"rational_polynomial"`` or
+        ``"equidistant"`` (a fisheye lens: 4 coefficients, no skew).
     position : tuple of 3 float
         Optical centre ``c`` in the world frame [m].
     orientation : tuple of 4 float
@@ -270,6 +283,8 @@ class CameraModel:
               f"{model!r} is not supported (use one of {sorted(DISTORTION_MODELS)})")
         check(len(d) in DISTORTION_MODELS[model], "camera.d",
               f"{model} takes {DISTORTION_MODELS[model]} coefficients, got {len(d)}")
+        check(model != "equidistant" or k[1] == 0.0, "camera.k",
+              f"the equidistant (fisheye) model takes no skew, got K[0][1] = {k[1]}")
         set_(self, "d", d)
         set_(self, "position", _finite_seq("position", self.position, 3))
         q = _finite_seq("orientation", self.orientation, 4)
@@ -304,8 +319,17 @@ class CameraModel:
 
     @cached_property
     def has_distortion(self) -> bool:
-        """True if any distortion coefficient is non-zero."""
-        return bool(np.any(self.D != 0.0))
+        """True unless the camera is a plain pinhole (no non-zero coefficient).
+
+        A fisheye (``equidistant``) lens is never one: with every coefficient zero it still
+        maps the ray's angle theta to ``r_d = theta``, not ``tan theta``.
+        """
+        return self.distortion_model == "equidistant" or bool(np.any(self.D != 0.0))
+
+    @property
+    def fisheye(self) -> bool:
+        """Whether the lens is the ``equidistant`` (fisheye) model (:mod:`cv2.fisheye`)."""
+        return self.distortion_model == "equidistant"
 
     @cached_property
     def R_wc(self) -> FloatArray:  # noqa: N802
@@ -377,6 +401,10 @@ class CameraModel:
         pts = np.concatenate([xy.reshape(-1, 2), np.ones((xy.size // 2, 1))], axis=1)
         if pts.shape[0] == 0:
             return np.zeros(shp)
+        if self.fisheye:
+            uv = cv2.fisheye.distortPoints(np.ascontiguousarray(pts[:, :2]).reshape(-1, 1, 2),
+                                           self.K, self.D)
+            return uv.reshape(shp)
         uv, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), self.K,
                                   self.D if self.has_distortion else None)
         return uv.reshape(shp)
@@ -424,8 +452,8 @@ class CameraModel:
             return np.stack([x, y], axis=1).reshape(shp)
         if flat.shape[0] == 0:
             return np.zeros(shp)
-        out = cv2.undistortPoints(flat.reshape(-1, 1, 2), self.K, self.D,
-                                  criteria=_UNDISTORT_CRITERIA)
+        undistort = cv2.fisheye.undistortPoints if self.fisheye else cv2.undistortPoints
+        out = undistort(flat.reshape(-1, 1, 2), self.K, self.D, criteria=_UNDISTORT_CRITERIA)
         return out.reshape(shp)
 
     def pixel_to_ray(self, pixels: ArrayLike) -> FloatArray:
