@@ -295,3 +295,34 @@ def test_controller_node_clock_mismatch_from_the_start(ros_harness: rosutil.RosH
     assert rig.cmds[-1] == 0.0
     assert "joint_states stamped +3.000 s from the node's clock" in ctl.output()
     assert "is arriving" not in ctl.output()
+
+
+def test_controller_node_unwraps_a_driver_within_a_turn(ros_harness: rosutil.RosHarness,
+                                                        node_processes) -> None:  # noqa: ANN001
+    """A driver that reports theta within a turn ([-pi, pi)): the controller's states carry
+    the accumulating angle across the wraps (no leap of a turn, no FAULT), and it says once
+    that it unwraps."""
+    h = ros_harness
+    rig = Rig(h, [0.0, 0.0, 0.0, 2.0], t0_ns=10 * NS)
+    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
+        "-p", "use_sim_time:=true", "-p", "loop.trigger:=joint_states"])
+    rig.wait_for_node(ctl)
+    rate = 40.0  # [rad/s]: a turn in 0.16 s, 5 ms a sample
+    sent = []
+    for k in range(120):
+        rig.t_ns += 5 * MS
+        rig.clock(rig.t_ns)
+        acc = 2.5 + rate * 5e-3 * k
+        sent.append(acc)
+        rig.joint_state(theta=math.remainder(acc, 2 * math.pi), theta_dot=rate)
+        h.spin_for(0.003)
+    assert h.spin_until(lambda: len(rig.states) >= 100, timeout=10.0), ctl.output()[-2000:]
+    theta = np.array([s.theta for s in rig.states if s.mode != FAULT])
+    assert theta.size >= 100 and not any(s.mode == FAULT for s in rig.states)
+    assert np.all(np.diff(theta) > 0) and theta[-1] - theta[0] > 4 * math.pi
+    # the turns before the first sample are the driver's to know: a whole number of them
+    offset = theta - np.array(sent)[-theta.size:]
+    turns = offset / (2 * math.pi)
+    np.testing.assert_allclose(turns, np.round(turns[0]), atol=1e-9)
+    out = ctl.output()
+    assert out.count("the frame angle wraps at a turn") == 1, out[-3000:]

@@ -72,6 +72,7 @@ from bfr_ros.node_common import (
     place_process,
     read_parameter_tree,
     run_node,
+    turn_unwrapper,
 )
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
@@ -253,6 +254,8 @@ class CameraNode(Node):
         self.info_raw = b""  # the last camera_info taken, without its stamp
         self.js_sub = PolledSubscription(self, JointState, "joint_states",
                                          JOINT_STATES_POLLED_QOS)
+        # a driver's within-a-turn angle made accumulating
+        self.turns = turn_unwrapper(self, self.js_sub.topic_name)
         self.throttle = Throttle()
         # timeouts on the node's clock: simulated time under use_sim_time
         self.create_timer(max(self.frame_timeout / 4.0, 0.05), self._watchdog)
@@ -313,7 +316,7 @@ class CameraNode(Node):
             return  # another joint's message
         if j >= len(position):
             return
-        theta = float(position[j])
+        theta = self.turns(float(position[j]))  # accumulating (a driver's may wrap)
         theta_dot = float(velocity[j]) if j < len(velocity) else 0.0
         self.theta.add(t_ns, theta, theta_dot)
 

@@ -85,6 +85,7 @@ from bfr_ros.node_common import (
     read_parameter_tree,
     run_node,
     stamp_to_ns,
+    turn_unwrapper,
 )
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -259,6 +260,8 @@ class ControllerNode(Node):
         # the steady clock at the first stale sample's arrival before any good one, and the
         # stale samples dropped as the start-up backlog (:meth:`_start_backlog`)
         self.first_stale_ns: int | None = None
+        # a driver's within-a-turn angle made accumulating
+        self.turns = turn_unwrapper(self, self.js_sub.topic_name)
         self.backlog_dropped = 0
         self.last_step_ns: int | None = None
         self.pending: list[BallObservation] = []
@@ -329,7 +332,7 @@ class ControllerNode(Node):
                 f"(> {self.max_age_ns / _NS:g} s): stale data or a clock mismatch "
                 f"(use_sim_time must match the publisher's clock)", t_ns, theta, theta_dot,
                 stale=now - t_ns > self.max_age_ns)
-        return t_ns, theta, theta_dot
+        return t_ns, self.turns(theta), theta_dot
 
     def _on_exception(self, where: str, exc: Exception) -> None:
         """An exception in a callback: FAULT with zero torque, logged once per reason."""

@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import rclpy
 from bfr_model.param_file import ParameterError, load_ros_parameters
+from bfr_model.turns import TurnUnwrapper
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.duration import Duration
@@ -85,6 +86,7 @@ __all__ = [
     "run_node",
     "run_nodes",
     "stamp_to_ns",
+    "turn_unwrapper",
     "unflatten",
 ]
 
@@ -949,6 +951,19 @@ def _cdr_header(data: bytes | memoryview) -> tuple[int, str, int]:
     sec, nsec = _STAMP.unpack_from(data, 4)
     frame_id, pos = _cdr_string(data, 12)
     return sec * _NS + nsec, frame_id, pos
+
+
+def turn_unwrapper(node: Any, topic: str) -> TurnUnwrapper:
+    """A :class:`bfr_model.turns.TurnUnwrapper` for ``node``'s encoder on ``topic``.
+
+    The contract's theta accumulates over turns (docs/hardware.md); a driver that reports it
+    within a turn is unwrapped, and the node says so once, at the first wrap.
+    """
+    def said() -> None:
+        node.get_logger().warn(f"{topic}: the frame angle wraps at a turn (the contract, "
+                               f"docs/hardware.md: it accumulates); unwrapped here")
+
+    return TurnUnwrapper(on_first_wrap=said)
 
 
 def parse_joint_state(data: bytes | memoryview) -> tuple[int, list[str], tuple[float, ...],

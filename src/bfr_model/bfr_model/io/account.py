@@ -51,7 +51,10 @@ limit, that of the samples present, so that ``seconds_used <= seconds_present`` 
 limit from the used samples alone moves when duplicates are dropped, and counted a hole of
 the present samples as covered).
 
-Physical gates (:func:`gate_samples`), the same for every reader, in this order:
+Physical gates (:func:`gate_samples`), the same for every reader, in this order (first
+:func:`bfr_model.turns.unwrap_turns`: an encoder reported within one turn, ``[-pi, pi)`` or ``[0, 2 pi)``,
+is unwrapped to the accumulating angle the formats mean, said in the account's actions,
+before step 3 could take its wraps for jumps; the readers use :attr:`GateResult.theta`):
 
 1. non-finite time, angle, rate or torque: the sample is dropped (``non_finite``);
 2. an isolated time stamp ahead of its successor whose removal restores the order is dropped
@@ -87,6 +90,7 @@ from numpy.typing import NDArray
 
 from bfr_model.params import RigParams, load_params
 from bfr_model.recording import RecordingError
+from bfr_model.turns import unwrap_turns
 
 __all__ = [
     "CAUSES",
@@ -397,12 +401,19 @@ class GateResult:
         Samples dropped by cause.
     first : dict of str to int
         Index (into the input) of the first sample dropped or excluded per cause.
+    theta : ndarray or None
+        The frame angle as used [rad]: the input's, with
+        :func:`bfr_model.turns.unwrap_turns` applied.
+    wraps : int
+        Wraps of a within-a-turn encoder undone (the first at ``first["wrapped"]``).
     """
 
     keep: NDArray[np.bool_]
     ball_off: NDArray[np.bool_]
     dropped: dict[str, int] = field(default_factory=dict)
     first: dict[str, int] = field(default_factory=dict)
+    theta: NDArray[np.float64] | None = None
+    wraps: int = 0
 
     def actions(self, where: Callable[[int], str]) -> list[str]:
         """One phrase per cause: what was done and where it first happened."""
@@ -415,6 +426,10 @@ class GateResult:
         if self.ball_off.any():
             out.append(f"ball_off_frame: ball fix excluded, first at "
                        f"{where(self.first['ball_off_frame'])}")
+        if self.wraps:
+            out.append(f"theta: reported within one turn; {self.wraps} wrap(s) undone (the "
+                       f"angle accumulates over turns), first at "
+                       f"{where(self.first['wrapped'])}")
         return out
 
     def account(self, *, source: str, kind: str, t: NDArray[np.float64],
@@ -559,6 +574,9 @@ def gate_samples(t: NDArray[np.float64], theta: NDArray[np.float64],
     keep = np.ones(n, bool)
     dropped: dict[str, int] = {}
     first: dict[str, int] = {}
+    theta, wrapped = unwrap_turns(theta)
+    if wrapped.size:
+        first["wrapped"] = int(wrapped[0])
     all_idx = np.arange(n)
     finite = np.isfinite(t) & np.isfinite(theta) & np.isfinite(theta_dot) & np.isfinite(torque)
     for col in others:
@@ -585,4 +603,5 @@ def gate_samples(t: NDArray[np.float64], theta: NDArray[np.float64],
         ball_off |= keep & (np.isinf(ball_x) | np.isinf(ball_y))
         if ball_off.any():
             first["ball_off_frame"] = int(np.argmax(ball_off))
-    return GateResult(keep=keep, ball_off=ball_off, dropped=dropped, first=first)
+    return GateResult(keep=keep, ball_off=ball_off, dropped=dropped, first=first, theta=theta,
+                      wraps=int(wrapped.size))

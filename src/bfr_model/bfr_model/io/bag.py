@@ -66,6 +66,7 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from bfr_model.io.account import Gates, ReadAccount, covered_seconds, gate_samples
 from bfr_model.param_file import ParameterError, share_path
 from bfr_model.recording import Recording, RecordingError
+from bfr_model.turns import unwrap_turns
 
 __all__ = [
     "DEFAULT_TOPICS",
@@ -1122,7 +1123,9 @@ def _read_joint_states(msgs: list[RawMessage], decode: _Decoder, notes: list[str
     theta_dot = np.array([_joint_value(s.velocity, j) for s in js])
     if np.isnan(theta_dot).all():
         ts_s = stamp / _NS
-        theta_dot = np.gradient(theta, ts_s) if len(js) > 1 else np.zeros(len(js))
+        # of the accumulating angle (a wrap is no motion; the gates unwrap theta too)
+        theta_dot = (np.gradient(unwrap_turns(theta)[0], ts_s) if len(js) > 1
+                     else np.zeros(len(js)))
         notes.append("theta_dot: joint_states without velocity; numerical derivative used")
     effort = np.array([_joint_value(s.effort, j) for s in js])
     g = gate_samples(stamp.astype(np.float64) / _NS, theta, theta_dot,
@@ -1137,7 +1140,7 @@ def _read_joint_states(msgs: list[RawMessage], decode: _Decoder, notes: list[str
         dropped["corrupt"] = dropped.get("corrupt", 0) + corrupt
     actions += g.actions(lambda i: f"stamp {stamp[i] / _NS:.6f} s")
     seq = np.array([m.sequence for m in raw], dtype=np.int64)
-    return _JointStates(stamp=stamp[keep], offset=offset, theta=theta[keep],
+    return _JointStates(stamp=stamp[keep], offset=offset, theta=g.theta[keep],
                         theta_dot=theta_dot[keep], effort=effort[keep], sequence=seq[keep],
                         account={"present": len(msgs), "dropped": dropped, "actions": actions,
                                  "span": float(stamp[-1] - stamp[0]) / _NS})

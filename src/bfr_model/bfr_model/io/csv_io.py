@@ -354,7 +354,7 @@ def _gated(p: Path, table: _CsvTable, col: dict[str, np.ndarray],
                         unit="row")
     if not g.keep.any():
         raise CsvFormatError(f"{p}: no row passed the checks: {account.line()}")
-    out = {k: v[g.keep] for k, v in col.items()}
+    out = {k: v[g.keep] for k, v in {**col, "theta": g.theta}.items()}
     if g.ball_off.any():
         off = g.ball_off[g.keep]
         if "ball_valid" in out:

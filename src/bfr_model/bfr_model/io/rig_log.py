@@ -625,6 +625,9 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
                           f"(same as line {lines[k - 1]}); {g.dropped['duplicate']} "
                           f"duplicate(s) in this run")
     keep = g.keep
+    if g.wraps:  # an encoder reported within a turn: the accumulating angle (account.py)
+        data = data.copy()
+        data[:, KEYS.index("theta")] = g.theta
     events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in raw.events]
     account = g.account(source=source, kind="rig_log", t=col["t"], lines=lines,
                         lost=raw.lost, unit="line", details=raw.details, garbage=raw.garbage)
