@@ -271,16 +271,23 @@ def test_every_callback_the_node_registers_puts_an_exception_into_fault() -> Non
         assert len(seen) == 1 and isinstance(seen[0][1], Exception), (name, seen)
 
 
+def _step_per_sample(h: rosutil.RosHarness, node_processes  # noqa: ANN001
+                     ) -> tuple[Rig, rosutil.NodeProcess]:
+    """A test rig and a controller node stepping on each sample, under its simulated clock."""
+    rig = Rig(h, [0.0, 0.0, 0.0, 2.0], t0_ns=10 * NS)
+    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
+        "-p", "use_sim_time:=true", "-p", "loop.trigger:=joint_states"])
+    rig.wait_for_node(ctl)
+    return rig, ctl
+
+
 def test_controller_node_clock_mismatch_from_the_start(ros_harness: rosutil.RosHarness,
                                                        node_processes) -> None:  # noqa: ANN001
     """Every sample stale from the first on (a driver on another clock) is not a start-up
     backlog: after safety.max_stamp_age of steady time from the first one's arrival, FAULT
     with zero torque."""
     h = ros_harness
-    rig = Rig(h, [0.0, 0.0, 0.0, 2.0], t0_ns=10 * NS)
-    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
-        "-p", "use_sim_time:=true", "-p", "loop.trigger:=joint_states"])
-    rig.wait_for_node(ctl)
+    rig, ctl = _step_per_sample(h, node_processes)
     for _ in range(5):  # the clock reaches the node (without one no age is checked)
         rig.t_ns += MS
         rig.clock(rig.t_ns)
@@ -303,10 +310,7 @@ def test_controller_node_unwraps_a_driver_within_a_turn(ros_harness: rosutil.Ros
     the accumulating angle across the wraps (no leap of a turn, no FAULT), and it says once
     that it unwraps."""
     h = ros_harness
-    rig = Rig(h, [0.0, 0.0, 0.0, 2.0], t0_ns=10 * NS)
-    ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
-        "-p", "use_sim_time:=true", "-p", "loop.trigger:=joint_states"])
-    rig.wait_for_node(ctl)
+    rig, ctl = _step_per_sample(h, node_processes)
     rate = 40.0  # [rad/s]: a turn in 0.16 s, 5 ms a sample
     sent = []
     for k in range(120):
