@@ -125,13 +125,28 @@ def test_fisheye_camera_matches_the_equidistant_closed_form_and_round_trips() ->
     np.testing.assert_allclose(back.project(pts), hand, atol=1e-9)
 
 
-@pytest.mark.parametrize(("change", "match"), [
-    ({"d": (0.1, 0.0, 0.0)}, "equidistant takes \\(4,\\) coefficients, got 3"),
-    ({"k": (300.0, 0.5, 321.0, 0.0, 302.0, 238.0, 0.0, 0.0, 1.0)}, "takes no skew"),
-])
-def test_fisheye_camera_rejects(change: dict, match: str) -> None:
-    with pytest.raises(CameraModelError, match=match):
-        CameraModel(**{**FISHEYE, **change})
+def test_fisheye_camera_with_skew_and_beyond_its_field() -> None:
+    """A fisheye calibration with skew (the calibrator fits it unless told not to): the
+    closed form with ``u = fx x_d + s y_d + cx`` and the round trip; a pixel whose ray the
+    lens model cannot invert is NaN, never OpenCV's -1e6 placeholder; three coefficients are
+    refused."""
+    cam = CameraModel(**{**FISHEYE, "k": (300.0, 0.8, 321.0, 0.0, 302.0, 238.0, 0, 0, 1)})
+    rng = np.random.default_rng(3)
+    xy = rng.uniform(-0.8, 0.8, (40, 2))
+    r = np.hypot(xy[:, 0], xy[:, 1])
+    th = np.arctan(r)
+    k1, k2, k3, k4 = FISHEYE["d"]
+    s = th * (1 + k1 * th**2 + k2 * th**4 + k3 * th**6 + k4 * th**8) / r
+    xd, yd = s * xy[:, 0], s * xy[:, 1]
+    hand = np.stack([300.0 * xd + 0.8 * yd + 321.0, 302.0 * yd + 238.0], axis=1)
+    np.testing.assert_allclose(cam.distort_normalized(xy), hand, atol=1e-9)
+    np.testing.assert_allclose(cam.pixel_to_normalized(hand), xy, atol=1e-7)
+    # a lens whose theta_d turns back (k1 < 0, large): beyond its turning point no ray
+    bent = cam.replace(d=(-0.6, 0.0, 0.0, 0.0))
+    far = bent.pixel_to_normalized(np.array([[321.0 + 300.0 * 2.0, 238.0]]))
+    assert np.all(np.isnan(far)) or np.all(np.abs(far) < 1e5), far
+    with pytest.raises(CameraModelError, match="equidistant takes \\(4,\\) coefficients"):
+        CameraModel(**{**FISHEYE, "d": (0.1, 0.0, 0.0)})
 
 
 def test_pixel_to_plane_without_intersection_is_nan() -> None:

@@ -312,21 +312,23 @@ def test_controller_node_unwraps_a_driver_within_a_turn(ros_harness: rosutil.Ros
     h = ros_harness
     rig, ctl = _step_per_sample(h, node_processes)
     rate = 40.0  # [rad/s]: a turn in 0.16 s, 5 ms a sample
-    sent = []
+    sent = {}  # stamp [ns] -> the accumulating angle the driver wrapped
     for k in range(120):
         rig.t_ns += 5 * MS
         rig.clock(rig.t_ns)
         acc = 2.5 + rate * 5e-3 * k
-        sent.append(acc)
+        sent[rig.t_ns] = acc
         rig.joint_state(theta=math.remainder(acc, 2 * math.pi), theta_dot=rate)
         h.spin_for(0.003)
-    assert h.spin_until(lambda: len(rig.states) >= 100, timeout=10.0), ctl.output()[-2000:]
-    theta = np.array([s.theta for s in rig.states if s.mode != FAULT])
-    assert theta.size >= 100 and not any(s.mode == FAULT for s in rig.states)
+    assert h.spin_until(lambda: rosutil.stamp_ns(rig.states[-1]) == rig.t_ns if rig.states
+                        else False, timeout=10.0), ctl.output()[-2000:]
+    assert len(rig.states) >= 100 and not any(s.mode == FAULT for s in rig.states)
+    # each state paired with its sample by stamp (a best-effort sample may be missing)
+    theta = np.array([s.theta for s in rig.states])
+    acc = np.array([sent[rosutil.stamp_ns(s)] for s in rig.states])
     assert np.all(np.diff(theta) > 0) and theta[-1] - theta[0] > 4 * math.pi
     # the turns before the first sample are the driver's to know: a whole number of them
-    offset = theta - np.array(sent)[-theta.size:]
-    turns = offset / (2 * math.pi)
+    turns = (theta - acc) / (2 * math.pi)
     np.testing.assert_allclose(turns, np.round(turns[0]), atol=1e-9)
     out = ctl.output()
     assert out.count("the frame angle wraps at a turn") == 1, out[-3000:]

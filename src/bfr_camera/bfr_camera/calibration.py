@@ -16,8 +16,7 @@ camera coordinates
 
     X_c = R_cw (X_w - c),        R_cw = R_wc^T.
 
-Pinhole model with lens distortion (OpenCV / ROS ``plumb_bob``, ``rational_polynomial``,
-``equidistant``)
+Lens models (OpenCV / ROS ``plumb_bob``, ``rational_polynomial``, ``equidistant``)
 ----------------------------------------------------------------------------------------
 Normalised coordinates ``x = X_c / Z_c``, ``y = Y_c / Z_c``, ``r^2 = x^2 + y^2``,
 
@@ -27,11 +26,11 @@ Normalised coordinates ``x = X_c / Z_c``, ``y = Y_c / Z_c``, ``r^2 = x^2 + y^2``
     u = fx x_d + s y_d + cx,   v = fy y_d + cy,        K = [[fx, s, cx], [0, fy, cy], [0, 0, 1]]
 
 with ``D = (k1, k2, p1, p2, k3[, k4, k5, k6])``. A fisheye lens (ROS ``equidistant``,
-OpenCV's :mod:`cv2.fisheye`, ``D = (k1, k2, k3, k4)``, no skew) maps the ray's angle from the
+OpenCV's :mod:`cv2.fisheye`, ``D = (k1, k2, k3, k4)``) maps the ray's angle from the
 optical axis ``theta = atan r`` instead:
 
     theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8),
-    (x_d, y_d) = (theta_d / r) (x, y),   u = fx x_d + cx,   v = fy y_d + cy.
+    (x_d, y_d) = (theta_d / r) (x, y),   u = fx x_d + s y_d + cx,   v = fy y_d + cy.
 
 Pixel centres sit at integer coordinates (OpenCV and ROS convention): the image centre of a
 W x H image is ((W-1)/2, (H-1)/2).
@@ -232,7 +231,7 @@ class CameraModel:
         Distortion coefficients D [-] in OpenCV/ROS order (0, 4, 5, 8, 12 or 14 of them).
     distortion_model : str
         ``"plumb_bob"`` (up to 5 coefficients), ``"rational_polynomial"`` or
-        ``"equidistant"`` (a fisheye lens: 4 coefficients, no skew).
+        ``"equidistant"`` (a fisheye lens: 4 coefficients).
     position : tuple of 3 float
         Optical centre ``c`` in the world frame [m].
     orientation : tuple of 4 float
@@ -283,8 +282,6 @@ class CameraModel:
               f"{model!r} is not supported (use one of {sorted(DISTORTION_MODELS)})")
         check(len(d) in DISTORTION_MODELS[model], "camera.d",
               f"{model} takes {DISTORTION_MODELS[model]} coefficients, got {len(d)}")
-        check(model != "equidistant" or k[1] == 0.0, "camera.k",
-              f"the equidistant (fisheye) model takes no skew, got K[0][1] = {k[1]}")
         set_(self, "d", d)
         set_(self, "position", _finite_seq("position", self.position, 3))
         q = _finite_seq("orientation", self.orientation, 4)
@@ -401,9 +398,9 @@ class CameraModel:
         pts = np.concatenate([xy.reshape(-1, 2), np.ones((xy.size // 2, 1))], axis=1)
         if pts.shape[0] == 0:
             return np.zeros(shp)
-        if self.fisheye:
+        if self.fisheye:  # OpenCV's skew: u = fx (x_d + alpha y_d) + cx, alpha = s / fx
             uv = cv2.fisheye.distortPoints(np.ascontiguousarray(pts[:, :2]).reshape(-1, 1, 2),
-                                           self.K, self.D)
+                                           self.K, self.D, alpha=self.k[1] / self.k[0])
             return uv.reshape(shp)
         uv, _ = cv2.projectPoints(pts.reshape(-1, 1, 3), np.zeros(3), np.zeros(3), self.K,
                                   self.D if self.has_distortion else None)
@@ -432,7 +429,8 @@ class CameraModel:
     def project(self, points_w: ArrayLike) -> FloatArray:
         """Pixel coordinates of world points, (..., 3) -> (..., 2) [px] (NaN behind the camera).
 
-        Equivalent to ``cv2.projectPoints(X_w, rvec, tvec, K, D)``.
+        Equivalent to ``cv2.projectPoints(X_w, rvec, tvec, K, D)`` (its fisheye twin for an
+        ``equidistant`` lens).
         """
         return self.project_camera(self.camera_from_world(points_w))
 
@@ -452,8 +450,20 @@ class CameraModel:
             return np.stack([x, y], axis=1).reshape(shp)
         if flat.shape[0] == 0:
             return np.zeros(shp)
-        undistort = cv2.fisheye.undistortPoints if self.fisheye else cv2.undistortPoints
-        out = undistort(flat.reshape(-1, 1, 2), self.K, self.D, criteria=_UNDISTORT_CRITERIA)
+        if self.fisheye:
+            # cv2.fisheye.undistortPoints ignores K's skew: the distorted normalised point by
+            # hand (y_d first), then undistorted with the identity for K; a point it cannot
+            # invert (no convergence, beyond the lens's field) comes back as -1e6: NaN
+            k = self.k
+            yd = (flat[:, 1] - k[5]) / k[4]
+            xd = (flat[:, 0] - k[2] - k[1] * yd) / k[0]
+            out = cv2.fisheye.undistortPoints(np.stack([xd, yd], axis=1).reshape(-1, 1, 2),
+                                              np.eye(3), self.D, criteria=_UNDISTORT_CRITERIA)
+            out = out.reshape(-1, 2)
+            out[np.any(out <= -1e5, axis=1)] = np.nan
+            return out.reshape(shp)
+        out = cv2.undistortPoints(flat.reshape(-1, 1, 2), self.K, self.D,
+                                  criteria=_UNDISTORT_CRITERIA)
         return out.reshape(shp)
 
     def pixel_to_ray(self, pixels: ArrayLike) -> FloatArray:

@@ -316,8 +316,9 @@ class CameraNode(Node):
             return  # another joint's message
         if j >= len(position):
             return
-        theta = self.turns(float(position[j]))  # accumulating (a driver's may wrap)
-        theta_dot = float(velocity[j]) if j < len(velocity) else 0.0
+        theta_dot = float(velocity[j]) if j < len(velocity) else math.nan
+        theta = self.turns(float(position[j]), t_ns * 1e-9, theta_dot)  # a driver's may wrap
+        theta_dot = 0.0 if math.isnan(theta_dot) else theta_dot
         self.theta.add(t_ns, theta, theta_dot)
 
     def take_info(self) -> None:

@@ -332,7 +332,7 @@ class ControllerNode(Node):
                 f"(> {self.max_age_ns / _NS:g} s): stale data or a clock mismatch "
                 f"(use_sim_time must match the publisher's clock)", t_ns, theta, theta_dot,
                 stale=now - t_ns > self.max_age_ns)
-        return t_ns, self.turns(theta), theta_dot
+        return t_ns, self.turns(theta, t_ns / _NS, theta_dot), theta_dot
 
     def _on_exception(self, where: str, exc: Exception) -> None:
         """An exception in a callback: FAULT with zero torque, logged once per reason."""

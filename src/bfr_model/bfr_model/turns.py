@@ -21,23 +21,36 @@ __all__ = ["TurnUnwrapper", "unwrap_turns"]
 
 #: Largest |angle| [rad] a wrapped encoder reports: one turn (``[0, 2 pi)``), and a margin.
 _ONE_TURN = 2.0 * math.pi + 0.1
+#: Largest motion [rad] between two samples a wrap may hide when no rate is known.
+_STEP_WITHOUT_RATE = 0.5
+#: With a rate: the motion must match ``theta_dot dt`` within this [rad] plus half of it.
+_STEP_TOLERANCE = 0.1
 
 
-def _is_wrap(before: float, after: float) -> int:
+def _is_wrap(before: float, after: float, expected: float = math.nan) -> int:
     """The turns to add at a step from ``before`` to ``after`` [rad]: -1, 0 or +1.
 
-    A wrap is a step of nearly a whole turn (within a quarter turn of +-2 pi) between two
-    angles within one turn of zero (an encoder that reports its angle modulo a turn); any
-    other step is left to the gates.
+    A wrap is a step of nearly a whole turn between two angles within one turn of zero (an
+    encoder that reports its angle modulo a turn), the rest of the step the frame's own
+    motion: ``expected`` [rad] (the rate times the interval) within
+    ``_STEP_TOLERANCE + |expected| / 2`` where known, else at most ``_STEP_WITHOUT_RATE``.
+    Any other step (a glitch of a sample, a gap) is left to the gates.
     """
     d = after - before
     k = round(d / (2.0 * math.pi))
-    if abs(k) != 1 or abs(d - 2.0 * math.pi * k) >= math.pi / 2:
+    if abs(k) != 1 or max(abs(before), abs(after)) > _ONE_TURN:
         return 0
-    return -k if max(abs(before), abs(after)) <= _ONE_TURN else 0
+    motion = d - 2.0 * math.pi * k
+    if math.isfinite(expected):
+        ok = abs(motion - expected) <= _STEP_TOLERANCE + 0.5 * abs(expected)
+    else:
+        ok = abs(motion) <= _STEP_WITHOUT_RATE
+    return -k if ok else 0
 
 
-def unwrap_turns(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
+def unwrap_turns(theta: NDArray[np.float64], t: NDArray[np.float64] | None = None,
+                 theta_dot: NDArray[np.float64] | None = None
+                 ) -> tuple[NDArray[np.float64], NDArray[np.intp]]:
     """The accumulating frame angle of one reported within a turn, and the wraps undone.
 
     The formats and the hardware contract carry theta accumulating over turns
@@ -50,6 +63,9 @@ def unwrap_turns(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArr
     ----------
     theta : ndarray, shape (n,)
         Frame angle as read [rad] (NaN where missing: skipped).
+    t, theta_dot : ndarray, shape (n,), optional
+        Time [s] and rate [rad/s]: a step is a wrap only if what is left of it is the motion
+        the mean rate over the interval makes (NaN rates: at most ``_STEP_WITHOUT_RATE``).
 
     Returns
     -------
@@ -66,9 +82,13 @@ def unwrap_turns(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArr
     near = np.abs(np.abs(d) - 2.0 * math.pi) < math.pi / 2
     if not near.any():
         return theta, none
+    expected = np.full(d.size, np.nan)
+    if t is not None and theta_dot is not None:
+        with np.errstate(invalid="ignore"):
+            expected = 0.5 * (theta_dot[idx][1:] + theta_dot[idx][:-1]) * np.diff(t[idx])
     turns = np.zeros(d.size)
     for i in np.nonzero(near)[0]:
-        turns[i] = _is_wrap(float(th[i]), float(th[i + 1]))
+        turns[i] = _is_wrap(float(th[i]), float(th[i + 1]), float(expected[i]))
     if not turns.any():
         return theta, none
     out = np.array(theta, dtype=np.float64)
@@ -79,25 +99,33 @@ def unwrap_turns(theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArr
 class TurnUnwrapper:
     """:func:`unwrap_turns` one sample at a time (a node's encoder stream).
 
-    ``unwrapper(theta)`` returns the accumulating angle; :attr:`wraps` counts the wraps
-    undone so far; ``on_first_wrap()`` is called at the first (a node says it once).
+    ``unwrapper(theta, t, theta_dot)`` returns the accumulating angle; :attr:`wraps` counts
+    the wraps undone so far; ``on_first_wrap()`` is called at the first (a node says it
+    once).
     """
 
     def __init__(self, on_first_wrap: Callable[[], None] | None = None) -> None:
-        self.last: float | None = None  # the last angle as reported [rad]
+        self.last: tuple[float, float, float] | None = None  # (theta, t, rate) as reported
         self.offset = 0.0               # whole turns added [rad]
         self.wraps = 0
         self.on_first_wrap = on_first_wrap
 
-    def __call__(self, theta: float) -> float:
-        """The accumulating angle [rad] of the next reported ``theta`` [rad]."""
-        if self.last is not None and math.isfinite(theta):
-            k = _is_wrap(self.last, theta)
+    def __call__(self, theta: float, t: float = math.nan,
+                 theta_dot: float = math.nan) -> float:
+        """The accumulating angle [rad] of the next reported ``theta`` [rad].
+
+        ``t`` [s] and ``theta_dot`` [rad/s], where known, make the step's rest the frame's
+        motion (:func:`_is_wrap`).
+        """
+        if not math.isfinite(theta):
+            return theta + self.offset
+        if self.last is not None:
+            th0, t0, w0 = self.last
+            k = _is_wrap(th0, theta, 0.5 * (w0 + theta_dot) * (t - t0))
             if k:
                 self.offset += 2.0 * math.pi * k
                 self.wraps += 1
                 if self.wraps == 1 and self.on_first_wrap is not None:
                     self.on_first_wrap()
-        if math.isfinite(theta):
-            self.last = theta
+        self.last = (theta, t, theta_dot)
         return theta + self.offset

@@ -52,9 +52,10 @@ limit from the used samples alone moves when duplicates are dropped, and counted
 the present samples as covered).
 
 Physical gates (:func:`gate_samples`), the same for every reader, in this order (first
-:func:`bfr_model.turns.unwrap_turns`: an encoder reported within one turn, ``[-pi, pi)`` or ``[0, 2 pi)``,
-is unwrapped to the accumulating angle the formats mean, said in the account's actions,
-before step 3 could take its wraps for jumps; the readers use :attr:`GateResult.theta`):
+:func:`bfr_model.turns.unwrap_turns`: an encoder reported within one turn, ``[-pi, pi)``
+or ``[0, 2 pi)``, is unwrapped to the accumulating angle the formats mean, said in the
+account's actions, before step 3 could take its wraps for jumps; the readers use
+:attr:`GateResult.theta`):
 
 1. non-finite time, angle, rate or torque: the sample is dropped (``non_finite``);
 2. an isolated time stamp ahead of its successor whose removal restores the order is dropped
@@ -574,7 +575,7 @@ def gate_samples(t: NDArray[np.float64], theta: NDArray[np.float64],
     keep = np.ones(n, bool)
     dropped: dict[str, int] = {}
     first: dict[str, int] = {}
-    theta, wrapped = unwrap_turns(theta)
+    theta, wrapped = unwrap_turns(theta, t, theta_dot)
     if wrapped.size:
         first["wrapped"] = int(wrapped[0])
     all_idx = np.arange(n)

@@ -160,6 +160,10 @@ class RigRun:
     time_origin : float
         Stamp [s] subtracted from the run's ``t`` column (its first, when the stamps count
         from an epoch: :data:`EPOCH_STAMPS`; else 0).
+    turns : ndarray, shape (n,), optional
+        Whole turns [rad] added to ``theta`` and ``phi`` of each sample where the log
+        reported its angle within a turn (:func:`bfr_model.turns.unwrap_turns`); None when
+        it accumulates, as the format means.
     """
 
     data: NDArray[np.float64]
@@ -172,6 +176,7 @@ class RigRun:
     garbage: tuple[int, ...] = ()
     nan_dtheta: tuple[int, str] = (0, "")
     time_origin: float = 0.0
+    turns: NDArray[np.float64] | None = None
 
     def column(self, key: str) -> NDArray[np.float64]:
         """One raw column by key (see :data:`KEYS`)."""
@@ -625,9 +630,12 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
                           f"(same as line {lines[k - 1]}); {g.dropped['duplicate']} "
                           f"duplicate(s) in this run")
     keep = g.keep
+    turns = None
     if g.wraps:  # an encoder reported within a turn: the accumulating angle (account.py)
         data = data.copy()
+        turns = np.nan_to_num(g.theta - data[:, KEYS.index("theta")])
         data[:, KEYS.index("theta")] = g.theta
+        data[:, KEYS.index("phi")] += turns  # the rig's phi is on its theta's branch
     events = [(int(np.count_nonzero(keep[:e])), msg) for e, msg in raw.events]
     account = g.account(source=source, kind="rig_log", t=col["t"], lines=lines,
                         lost=raw.lost, unit="line", details=raw.details, garbage=raw.garbage)
@@ -648,7 +656,8 @@ def _finish_run(raw: _RunRows, source: str, duplicates: str,
                   dropped_duplicates=int(g.dropped.get("duplicate", 0)), nan_dtheta=filled,
                   time_origin=origin,
                   ball_off=g.ball_off[keep], account=account,
-                  nan_ball=int(np.count_nonzero(no_xy[keep])), garbage=tuple(raw.garbage))
+                  nan_ball=int(np.count_nonzero(no_xy[keep])), garbage=tuple(raw.garbage),
+                  turns=None if turns is None else turns[keep])
 
 
 def _fill_velocity(data: NDArray[np.float64], missing: NDArray[np.bool_]) -> tuple[int, str]:
@@ -1129,7 +1138,8 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
         conversions.append(f"subtracted camera offset (cx, cy) = ({cx}, {cy}) m from x, y")
     shift = _turn_shift(raw.theta, rebase_turns, conversions)
     theta = raw.theta - shift
-    theta_res = _theta_resolution(raw.theta)
+    # the print's resolution, of the values as logged (before any turns were added)
+    theta_res = _theta_resolution(raw.theta if run.turns is None else raw.theta - run.turns)
     step = encoder_step(raw.theta, theta_res)
     if step:
         conversions.append(f"theta sits on an encoder lattice of {step:.6g} rad (measured: its "
@@ -1156,7 +1166,10 @@ def run_to_recording(run: RigRun, *, source: str = "<rig log>", rebase_turns: bo
     notes.append(f"dtheta: {vlag.note} (measured on this run; not applied by the reader)")
     timing = _sensor_timing(raw, fix_idx, fixes.backlog_end, vlag)
     phi_rig_ours = np.where(fixes.seen, raw.phi - shift, np.nan)
-    initialised = np.abs(phi_rig_ours - phi) < 0.5
+    off = phi_rig_ours - phi
+    if run.turns is not None:  # the rig's phi wraps on its own, at other samples than theta
+        off = np.remainder(off + math.pi, 2.0 * math.pi) - math.pi
+    initialised = np.abs(off) < 0.5
     phi_dot = np.where(fixes.valid & initialised, raw.dphi, np.nan)
     conversions.append("phi_dot = rig dphi where the ball is valid and the rig's phi "
                        "estimator is initialised, else NaN")
