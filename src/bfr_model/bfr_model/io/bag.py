@@ -30,11 +30,14 @@ role                topic                               type
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import io
 import json
 import math
 import os
+import signal
+import threading
 import time
 import warnings
 import weakref
@@ -194,6 +197,31 @@ class _WriterState:
     topics: dict[str, _TopicInfo] = field(default_factory=dict)
 
 
+@contextlib.contextmanager
+def _sigint_deferred() -> Any:
+    """Hold Python's ``KeyboardInterrupt`` until the block's file writes are complete.
+
+    The MCAP writer writes a record in several calls; a Ctrl-C between two of them (Python's
+    default SIGINT handler raises wherever the main thread is) left half a chunk in the file,
+    and the footer written by :meth:`BagWriter.close` after it made the chunk unreadable
+    (measured: "corrupt chunk at byte ~57383"). Only where that default handler is installed
+    and in the main thread (a node's own SIGINT handler sets a flag and raises nothing); the
+    interrupt is raised at the block's end, so the caller still sees it.
+    """
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield
+        return
+    caught: list[int] = []
+    signal.signal(signal.SIGINT, lambda signum, _frame: caught.append(signum))
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if caught:
+        raise KeyboardInterrupt
+
+
 def _finalize(state: _WriterState) -> None:  # pragma: no cover - interpreter exit path
     if not state.closed and state.writer is not None:
         try:
@@ -327,21 +355,22 @@ class BagWriter:
         timestamp_ns : int
             Receive (log) time [ns], non-negative.
         """
-        self.add_topic(topic, msgtype)
         ts = int(timestamp_ns)
         if ts < 0:
             raise BagError(f"{self.path}: negative timestamp {ts} ns on {topic!r}")
-        info = self._state.topics[topic]
-        self._state.writer.add_message(channel_id=info.channel_id, log_time=ts,
-                                       data=bytes(data), publish_time=ts,
-                                       sequence=info.count)
-        info.count += 1
-        self._count += 1
-        self._t_min = ts if self._t_min is None else min(self._t_min, ts)
-        self._t_max = ts if self._t_max is None else max(self._t_max, ts)
-        if self._flush_interval is not None and \
-                time.monotonic() - self._last_flush >= self._flush_interval:
-            self.flush()
+        with _sigint_deferred():  # records are written whole (see _sigint_deferred)
+            self.add_topic(topic, msgtype)
+            info = self._state.topics[topic]
+            self._state.writer.add_message(channel_id=info.channel_id, log_time=ts,
+                                           data=bytes(data), publish_time=ts,
+                                           sequence=info.count)
+            info.count += 1
+            self._count += 1
+            self._t_min = ts if self._t_min is None else min(self._t_min, ts)
+            self._t_max = ts if self._t_max is None else max(self._t_max, ts)
+            if self._flush_interval is not None and \
+                    time.monotonic() - self._last_flush >= self._flush_interval:
+                self._flush()
 
     def write_message(self, topic: str, msg: Any, timestamp_ns: int) -> None:
         """Serialise a ``rosbags`` message object with the typestore and write it."""
@@ -358,6 +387,10 @@ class BagWriter:
 
     def flush(self) -> None:
         """Write the pending chunk and flush the file (data survives a later kill)."""
+        with _sigint_deferred():
+            self._flush()
+
+    def _flush(self) -> None:
         if self.closed:
             return
         self._state.writer.flush()
@@ -371,6 +404,10 @@ class BagWriter:
 
     def close(self) -> None:
         """Flush, write the MCAP summary and ``metadata.yaml``; idempotent."""
+        with _sigint_deferred():
+            self._close()
+
+    def _close(self) -> None:
         if self.closed:
             return
         w = self._state.writer
