@@ -25,7 +25,7 @@ def test_every_step_runs_in_two_processes() -> None:
     run = _run("--jobs", "2")
     assert run.returncode == 0, run.stderr[-2000:]
     steps = [name for group in warm.GROUPS.values() for name in group]
-    assert len(steps) == 5 and len(warm.GROUPS) == 2
+    assert len(steps) == 6 and len(warm.GROUPS) == 2
     lines = run.stdout.splitlines()
     for name in steps:
         assert sum(line.startswith(f"warm: {name}: ") for line in lines) == 1, (name, lines)

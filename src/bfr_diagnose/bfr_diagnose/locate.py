@@ -357,7 +357,7 @@ class _Predictor:
         <bfr_diagnose.grip.SlipLaw.rollout>`): rolling at x0, or under creep with the
         relative spin ``x0[4]`` when given.
         """
-        u = np.ascontiguousarray(self.u[i:i + n])
+        u = np.array(self.u[i:i + n], dtype=float)  # writable: one signature of the kernels
         if self.prep.has_ball and self.slip is not None:
             return self.slip.rollout(self.model, x0, u, self.dt)
         if self.prep.has_ball:

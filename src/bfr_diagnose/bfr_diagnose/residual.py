@@ -392,11 +392,15 @@ class ResidualEvaluator:
         self._grid = np.arange(0, n, q)             # quadrature nodes (full-grid indices)
         ok_s = ok[self._grid]
         ns = self._grid.size
-        idx_s = np.arange(J, ns - J, max(round(self.cfg.stride / q), 1))
+        step = max(round(self.cfg.stride / q), 1)
+        idx_s = np.arange(J, ns - J, step)
         # keep outputs whose whole kernel support is usable
         bad = np.convolve((~ok_s).astype(float), np.ones(2 * J + 1), mode="valid") > 0
         idx_s = idx_s[~bad[idx_s - J]]
         self._idx_s = idx_s
+        self._step = step                           # outputs every step-th node (_conv)
+        self._n_out = len(range(J, ns - J, step))
+        self._kept = (idx_s - J) // step            # the kept ones among them
         self.idx = self._grid[idx_s]
         self._sel_s = np.nonzero(ok_s)[0]           # usable nodes (subgrid positions)
         self._sel = self._grid[self._sel_s]         # ... as full-grid indices
@@ -408,8 +412,22 @@ class ResidualEvaluator:
         self._model: RigidModel | None = None   # the last evaluation's model
 
     def _conv(self, x: FloatArray, kern: FloatArray) -> FloatArray:
-        """Kernel sums at the kept outputs; ``x`` is given on the quadrature nodes."""
-        return np.convolve(x, kern, mode="valid")[self._idx_s - self.J]
+        """Kernel sums at the kept outputs; ``x`` is given on the quadrature nodes.
+
+        ``y_m = sum_j k_j x_{m+J-j}`` is wanted only at ``m = J + s q`` (``s`` the outputs'
+        step in nodes): split ``j = p + s l`` into its ``s`` phases and each phase is a
+        convolution of every ``s``-th node with every ``s``-th weight (polyphase
+        decimation), ``1/s`` of the direct sum's work; the same sums, added in another order.
+        """
+        s, J = self._step, self.J
+        if s == 1:
+            return np.convolve(x, kern, mode="valid")[self._idx_s - J]
+        out = np.zeros(self._n_out)
+        for p in range(s):
+            start = (2 * J - p) % s                 # x_{2J - p + s (q - l)} = xs_{off + q - l}
+            off = (2 * J - p - start) // s
+            out += np.convolve(x[start::s], kern[p::s], mode="full")[off:off + self._n_out]
+        return out[self._kept]
 
     def _to_grid(self, arr: FloatArray) -> FloatArray:
         """Values at the usable nodes -> full grid (linear between nodes), NaN elsewhere."""

@@ -42,7 +42,9 @@ from bfr_camera.detector import BallDetector, load_detector_config
 from bfr_control.controller import OrbitalController, load_controller_config
 from bfr_control.estimator import BallObservation
 from bfr_diagnose.api import DiagnoseOptions, diagnose_recording
+from bfr_diagnose.grip import SlipLaw
 from bfr_diagnose.synth import SynthConfig, contact_recording, stabilised_recording
+from bfr_model.dynamics import RigidModel
 from bfr_model.params import load_params
 from bfr_sim.render import FrameRenderer, RenderOptions, rig_scene
 from bfr_sim.simulator_node import RigSimulation
@@ -101,6 +103,36 @@ def _diagnosis() -> None:
     diagnose_recording(rec, base, DiagnoseOptions(max_effects=1, block=1.5))
 
 
+def _slip() -> None:
+    """The slip test's laws, and the rigid model's functions of trajectories and states.
+
+    A ball that creeps, diagnosed (its rollouts, the creep in the equation error, the
+    prediction with the slip); Coulomb's coupled rollout; energies, forces and matrices of
+    whole trajectories and single states, rolling and creeping. On the first real log
+    whose ball slips these had compiled for 15 s inside ``bfr diagnose``.
+    """
+    base = load_params()
+    creeping = base.replace(**{"ball.creep_time": 0.02})
+    rec = stabilised_recording(creeping, base, SynthConfig(duration=10.0),
+                               np.random.default_rng(3))
+    summary = diagnose_recording(rec, base, DiagnoseOptions(max_effects=0)).to_json()
+    law = SlipLaw.of(summary["recordings"][0]["grip"].get("slip_test"))
+    if law is None or law.kind != "creep":
+        raise RuntimeError(f"a creeping ball's slip test chose {law}, not creep")
+    model = RigidModel(base)
+    x = np.tile([0.1, 0.3, 2.0, 2.4], (8, 1))
+    u = np.zeros(8)
+    SlipLaw(kind="coulomb", value=0.3).rollout(model, x[0], u, 0.002)
+    for m, states in ((model, x), (RigidModel(creeping), np.column_stack([x, np.zeros((8, 3))]))):
+        m.energy(states)
+        m.normal_force(states, u)
+        m.normal_force(states[0])
+        m.accelerations(states[0])
+        m.mass_matrix(float(states[0, 1]))
+        m.mass_matrix(states[:, 1])
+        m.gravity_vector(float(states[0, 0]), float(states[0, 1]))
+
+
 #: The steps, in groups that run side by side (one process each), the nodes' first. Cold,
 #: on this project's 2-CPU machine: the nodes about 110 s and the diagnosis 30 s more; the
 #: contact model alone about 120 s.
@@ -110,6 +142,7 @@ GROUPS: dict[str, dict[str, Callable[[], None]]] = {
         "simulator (RK4 plant, truth)": _simulator,
         "camera (track, detector, renderer)": _camera,
         "diagnosis (equation error, fits, rollouts, grip)": _diagnosis,
+        "slip (creep and Coulomb rollouts, trajectories' energy and forces)": _slip,
     },
     "contact model": {
         "contact model (closed loop)": _contact,
