@@ -225,8 +225,11 @@ def test_writer_errors(tmp_path: Path) -> None:
 
 
 CHILD = textwrap.dedent("""
-    import os, sys, time
+    import os, signal, sys, time
     import numpy as np
+    # Python's own Ctrl-C, even where the suite was started with SIGINT ignored (a background
+    # job of a non-interactive shell), which a child would inherit
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     from bfr_model.io.bag import BagWriter
     mode, path = sys.argv[1], sys.argv[2]
     # "sigint-busy": a chunk per message and no pause, so that the interrupt lands while a
@@ -291,12 +294,20 @@ def test_sigint_recorder_loses_nothing(mode: str, trials: int, tmp_path: Path) -
     procs = [subprocess.Popen([sys.executable, "-c", CHILD, mode, str(path)],
                               stdout=subprocess.PIPE, text=True, env=child_env())
              for path in paths]
-    for path, proc in zip(paths, procs, strict=True):
-        assert proc.stdout is not None
-        assert proc.stdout.readline().strip() == "ready"
-        time.sleep(0.3)
-        proc.send_signal(signal.SIGINT)
-        out, _ = proc.communicate(timeout=30)
+    outs = []
+    try:
+        for proc in procs:
+            assert proc.stdout is not None
+            assert proc.stdout.readline().strip() == "ready"
+            time.sleep(0.3)
+            proc.send_signal(signal.SIGINT)
+            outs.append(proc.communicate(timeout=30)[0])
+    finally:  # a writer that did not stop must not go on writing beside the suite
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+    for path, out in zip(paths, outs, strict=True):
         returned, written = (int(v) for v in out.split())
         assert written > 10 and written in (returned, returned + 1)
         rec = read_bag(path, strict=True)  # complete: footer and metadata.yaml
