@@ -18,6 +18,7 @@ from bfr_diagnose.identify import Part, Problem
 from bfr_diagnose.preprocess import SensorCorrection, prepare
 from bfr_diagnose.residual import (
     TAYLOR_STEP,
+    ResidualConfig,
     ResidualEvaluator,
     _sample_terms,
     pointwise_terms,
@@ -127,3 +128,19 @@ def test_the_last_small_step_moves_the_terms_as_an_evaluation_would(prep) -> Non
         scale = np.max(np.abs(exact), axis=1, keepdims=True)
         assert np.all(np.abs(moved - exact) <= 3e-10 * scale), (off, np.max(
             np.abs(moved - exact) / scale, axis=1))
+
+
+@pytest.mark.parametrize(("stride", "quad_step"), [(6, 2), (4, 2), (2, 2), (5, 1), (7, 1)])
+def test_the_kernel_sums_by_phases_are_the_direct_sums(prep, stride: int,  # noqa: ANN001
+                                                       quad_step: int) -> None:
+    """:meth:`ResidualEvaluator._conv` splits each kernel sum into the outputs' step of
+    phases (polyphase decimation); the kept outputs are the direct convolution's, to the
+    rounding of the sums' order, for steps 1 to 7 nodes and both kernels."""
+    ev = ResidualEvaluator(prep, ResidualConfig(stride=stride, quad_step=quad_step))
+    assert ev._step == max(round(stride / quad_step), 1)
+    x = np.random.default_rng(stride).standard_normal(ev._grid.size)
+    for kern in (ev.k, ev.kd):
+        direct = np.convolve(x, kern, mode="valid")[ev._idx_s - ev.J]
+        assert direct.size > 100
+        assert np.allclose(ev._conv(x, kern), direct, rtol=0.0,
+                           atol=1e-13 * np.max(np.abs(direct)))

@@ -17,7 +17,10 @@ nodes' own code paths with the shipped parameters:
 and then the analysis a researcher runs next, which compiled for a minute or two in its
 first run on a fresh machine: ``bfr diagnose`` (:func:`bfr_diagnose.api.diagnose_recording`)
 of a short synthetic recording with a concealed joint friction (the equation error's
-kernels, the fits, the prediction rollouts, the ball's grip); and, in a second process
+kernels, the fits, the prediction rollouts, the ball's grip), then of a ball whose spin
+creeps (the slip test's laws and the prediction with them, which on the first real log
+whose ball slips had compiled for 15 s) and the rigid model's functions of whole
+trajectories and single states (energy, forces, matrices); and, in a second process
 beside all of these (numba compiles on one core; the machine's second was idle meanwhile),
 the force-based contact model (:func:`bfr_diagnose.synth.contact_recording`: the free ball,
 compliant contact, friction-limited rolling) in bfr's closed loop.
@@ -134,8 +137,8 @@ def _slip() -> None:
 
 
 #: The steps, in groups that run side by side (one process each), the nodes' first. Cold,
-#: on this project's 2-CPU machine: the nodes about 110 s and the diagnosis 30 s more; the
-#: contact model alone about 120 s.
+#: on this project's 2-CPU machine: the nodes about 105 s, the diagnosis 31 s and the slip
+#: 34 s more; the contact model alone about 110 s (178 s in all, measured beside nothing).
 GROUPS: dict[str, dict[str, Callable[[], None]]] = {
     "nodes, then the diagnosis": {
         "controller (gains, estimator, PFL, prediction)": _controller,
