@@ -11,6 +11,8 @@ rows as a fresh one, to the Newton tolerance (1e-11 rad of the contact angle).
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from bfr_diagnose.effects import EFFECTS
@@ -130,14 +132,24 @@ def test_the_last_small_step_moves_the_terms_as_an_evaluation_would(prep) -> Non
             np.abs(moved - exact) / scale, axis=1))
 
 
-@pytest.mark.parametrize(("stride", "quad_step"), [(6, 2), (4, 2), (2, 2), (5, 1), (7, 1)])
+@pytest.mark.parametrize(("stride", "quad_step", "half_width"),
+                         [(6, 2, 0.2), (4, 2, 0.2), (2, 2, 0.2), (5, 1, 0.2), (7, 1, 0.2),
+                          (14, 2, 0.004)])
 def test_the_kernel_sums_by_phases_are_the_direct_sums(prep, stride: int,  # noqa: ANN001
-                                                       quad_step: int) -> None:
+                                                       quad_step: int,
+                                                       half_width: float) -> None:
     """:meth:`ResidualEvaluator._conv` splits each kernel sum into the outputs' step of
     phases (polyphase decimation); the kept outputs are the direct convolution's, to the
-    rounding of the sums' order, for steps 1 to 7 nodes and both kernels."""
-    ev = ResidualEvaluator(prep, ResidualConfig(stride=stride, quad_step=quad_step))
+    rounding of the sums' order, for steps of 1, 2, 3, 5 and 7 nodes, both kernels, outputs
+    dropped where the ball was not seen, and a step longer than the kernel (7 nodes, 5
+    weights)."""
+    usable = prep.usable.copy()
+    usable[prep.n // 3:prep.n // 3 + 200] = False  # a gap: outputs near it are not kept
+    gapped = dataclasses.replace(prep, ball_ok=usable & prep.ball_ok)
+    ev = ResidualEvaluator(gapped, ResidualConfig(stride=stride, quad_step=quad_step,
+                                                  half_width=half_width))
     assert ev._step == max(round(stride / quad_step), 1)
+    assert 0 < ev._kept.size < ev._n_out
     x = np.random.default_rng(stride).standard_normal(ev._grid.size)
     for kern in (ev.k, ev.kd):
         direct = np.convolve(x, kern, mode="valid")[ev._idx_s - ev.J]

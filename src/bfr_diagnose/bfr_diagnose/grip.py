@@ -531,7 +531,7 @@ def coupled_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
     ns = _substeps(dt)
     x = np.zeros(6)
     x[:4] = x0[:4]
-    # u copied: writable and contiguous, so one compiled signature serves every caller
+    # u copied (writable, contiguous): one compiled signature for read-only and writable u
     return _coupled_rollout(x, np.array(u, dtype=float), dt, ns, mu, pf, pt,
                             *model.geom_args, jb, rb, rr)
 
@@ -564,7 +564,7 @@ def creep_rollout(model: RigidModel, x0: FloatArray, u: FloatArray, dt: float,
     lam = float(curve_terms(float(x0[1]), pf, *model.geom_args)[8])
     rel0 = float(x0[4]) if len(x0) > 4 else 0.0
     x = np.array([x0[0], x0[1], x0[2], x0[3], x0[2] - lam * x0[3] / rr + rel0], float)
-    # u copied: writable and contiguous, so one compiled signature serves every caller
+    # u copied (writable, contiguous): one compiled signature for read-only and writable u
     return _creep_coupled_rollout(x, np.array(u, dtype=float), dt, ns, 1.0 / tau_s, jb,
                                   pt, *model.geom_args)[:, :4]
 

@@ -414,17 +414,18 @@ class ResidualEvaluator:
     def _conv(self, x: FloatArray, kern: FloatArray) -> FloatArray:
         """Kernel sums at the kept outputs; ``x`` is given on the quadrature nodes.
 
-        ``y_m = sum_j k_j x_{m+J-j}`` is wanted only at ``m = J + s q`` (``s`` the outputs'
+        ``y_m = sum_j k_j x_{m+J-j}`` is wanted only at ``m = J + s i`` (``s`` the outputs'
         step in nodes): split ``j = p + s l`` into its ``s`` phases and each phase is a
         convolution of every ``s``-th node with every ``s``-th weight (polyphase
         decimation), ``1/s`` of the direct sum's work; the same sums, added in another order.
+        A step longer than the kernel leaves phases without weights: they add nothing.
         """
         s, J = self._step, self.J
-        if s == 1:
+        if s == 1 or self._n_out == 0:
             return np.convolve(x, kern, mode="valid")[self._idx_s - J]
         out = np.zeros(self._n_out)
-        for p in range(s):
-            start = (2 * J - p) % s                 # x_{2J - p + s (q - l)} = xs_{off + q - l}
+        for p in range(min(s, kern.size)):
+            start = (2 * J - p) % s                 # x_{2J - p + s (i - l)} = xs_{off + i - l}
             off = (2 * J - p - start) // s
             out += np.convolve(x[start::s], kern[p::s], mode="full")[off:off + self._n_out]
         return out[self._kept]

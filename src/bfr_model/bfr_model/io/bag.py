@@ -30,7 +30,6 @@ role                topic                               type
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import io
 import json
@@ -195,31 +194,88 @@ class _WriterState:
     writer: Any
     closed: bool = False
     topics: dict[str, _TopicInfo] = field(default_factory=dict)
+    held: bool = False  # its writes hold a Ctrl-C until whole (_SigintHold)
 
 
-@contextlib.contextmanager
-def _sigint_deferred() -> Any:
-    """Hold Python's ``KeyboardInterrupt`` until the block's file writes are complete.
+class _SigintHold:
+    """Python's Ctrl-C, held while a bag record is being written (one per process).
 
     The MCAP writer writes a record in several calls; a Ctrl-C between two of them (Python's
-    default SIGINT handler raises wherever the main thread is) left half a chunk in the file,
-    and the footer written by :meth:`BagWriter.close` after it made the chunk unreadable
-    (measured: "corrupt chunk at byte ~57383"). Only where that default handler is installed
-    and in the main thread (a node's own SIGINT handler sets a flag and raises nothing); the
-    interrupt is raised at the block's end, so the caller still sees it.
+    default SIGINT handler raises wherever the main thread is) left half a chunk in the
+    file, and the footer written by :meth:`BagWriter.close` after it made the chunk
+    unreadable (measured: "corrupt chunk at byte ~57383"); between the writer's record and
+    its count it left a message more in the bag than ``metadata.yaml`` says. While a
+    :class:`BagWriter` is open in the main thread of a process whose SIGINT handler is
+    Python's own, this handler stands in for it: outside a write it raises
+    ``KeyboardInterrupt`` at once, as Python's does; inside one (``depth`` > 0, main thread
+    only) it notes the signal, and :meth:`release` raises it when the write is whole. The
+    last writer to close puts Python's handler back if this one is still installed. Where
+    another handler is installed (a node's own, for one) nothing changes. Per write: an
+    increment and a decrement (a handler swapped per write cost 14-21 us, tripling a write).
     """
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
-        yield
-        return
-    caught: list[int] = []
-    signal.signal(signal.SIGINT, lambda signum, _frame: caught.append(signum))
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, signal.default_int_handler)
-    if caught:
+
+    def __init__(self) -> None:
+        self.users = 0       # open writers that hold through this handler
+        self.depth = 0       # writes in progress in the main thread
+        self.caught = False  # a SIGINT came during one
+
+    def __call__(self, signum: int, frame: Any) -> None:
+        if self.depth > 0:
+            self.caught = True
+            return
         raise KeyboardInterrupt
+
+    def attach(self) -> bool:
+        """Install for a new writer (main thread only); whether its writes are held."""
+        if threading.current_thread() is not threading.main_thread():
+            return False
+        current = signal.getsignal(signal.SIGINT)
+        if current is signal.default_int_handler:
+            signal.signal(signal.SIGINT, self)
+        elif current is not self:
+            return False
+        self.users += 1
+        return True
+
+    def detach(self) -> None:
+        """A holding writer closed: Python's handler back after the last one."""
+        self.users -= 1
+        if (self.users <= 0 and threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGINT) is self):
+            signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    def during(self, held: bool) -> _Held:
+        """The context of one write of a writer whose writes are ``held`` (:meth:`attach`)."""
+        return _Held(self, held and threading.get_ident() == _MAIN_THREAD)
+
+
+class _Held:
+    """One write under :class:`_SigintHold`.
+
+    A SIGINT that came during it is raised at its end, also after an exception of the write,
+    which it then replaces (the exception its context): a Ctrl-C is never lost.
+    """
+
+    __slots__ = ("hold", "on")
+
+    def __init__(self, hold: _SigintHold, on: bool) -> None:
+        self.hold, self.on = hold, on
+
+    def __enter__(self) -> None:
+        if self.on:
+            self.hold.depth += 1
+
+    def __exit__(self, *exc: object) -> None:
+        if self.on:
+            hold = self.hold
+            hold.depth -= 1
+            if hold.depth == 0 and hold.caught:
+                hold.caught = False
+                raise KeyboardInterrupt
+
+
+_MAIN_THREAD = threading.main_thread().ident
+_HOLD = _SigintHold()
 
 
 def _finalize(state: _WriterState) -> None:  # pragma: no cover - interpreter exit path
@@ -231,6 +287,9 @@ def _finalize(state: _WriterState) -> None:  # pragma: no cover - interpreter ex
         except Exception:  # noqa: BLE001 - best effort at exit
             pass
         state.closed = True
+        if state.held:
+            state.held = False
+            _HOLD.detach()
 
 
 class BagWriter:
@@ -274,7 +333,7 @@ class BagWriter:
             raise BagError(f"{self.path}: cannot create bag: {exc}") from exc
         writer = Writer(fh, chunk_size=chunk_size, compression=CompressionType.NONE)
         writer.start(profile="ros2", library="bfr_model.io.bag")
-        self._state = _WriterState(fh=fh, writer=writer)
+        self._state = _WriterState(fh=fh, writer=writer, held=_HOLD.attach())
         self._schemas: dict[str, int] = {}
         self._flush_interval = flush_interval
         self._last_flush = time.monotonic()
@@ -325,6 +384,10 @@ class BagWriter:
         BagError
             If the topic exists with another type, or the type is unknown.
         """
+        with _HOLD.during(self._state.held):
+            self._add_topic(topic, msgtype)
+
+    def _add_topic(self, topic: str, msgtype: str) -> None:
         if self.closed:
             raise BagError(f"{self.path}: bag is closed")
         info = self._state.topics.get(topic)
@@ -358,8 +421,8 @@ class BagWriter:
         ts = int(timestamp_ns)
         if ts < 0:
             raise BagError(f"{self.path}: negative timestamp {ts} ns on {topic!r}")
-        with _sigint_deferred():  # records are written whole (see _sigint_deferred)
-            self.add_topic(topic, msgtype)
+        with _HOLD.during(self._state.held):  # records are written whole (_SigintHold)
+            self._add_topic(topic, msgtype)
             info = self._state.topics[topic]
             self._state.writer.add_message(channel_id=info.channel_id, log_time=ts,
                                            data=bytes(data), publish_time=ts,
@@ -387,7 +450,7 @@ class BagWriter:
 
     def flush(self) -> None:
         """Write the pending chunk and flush the file (data survives a later kill)."""
-        with _sigint_deferred():
+        with _HOLD.during(self._state.held):
             self._flush()
 
     def _flush(self) -> None:
@@ -404,7 +467,7 @@ class BagWriter:
 
     def close(self) -> None:
         """Flush, write the MCAP summary and ``metadata.yaml``; idempotent."""
-        with _sigint_deferred():
+        with _HOLD.during(self._state.held):
             self._close()
 
     def _close(self) -> None:
@@ -424,6 +487,9 @@ class BagWriter:
         self._state.closed = True
         self._finalizer.detach()
         self._write_metadata_yaml()
+        if self._state.held:  # the last holding writer puts Python's handler back
+            self._state.held = False
+            _HOLD.detach()
 
     def _write_metadata_yaml(self) -> None:
         start = self._t_min or 0
