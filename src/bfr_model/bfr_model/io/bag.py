@@ -208,7 +208,7 @@ class _SigintHold:
     :class:`BagWriter` is open in the main thread of a process whose SIGINT handler is
     Python's own, this handler stands in for it: outside a write it raises
     ``KeyboardInterrupt`` at once, as Python's does; inside one (``depth`` > 0, main thread
-    only) it notes the signal, and :meth:`release` raises it when the write is whole. The
+    only) it notes the signal, and :class:`_Held` raises it when the write is whole. The
     last writer to close puts Python's handler back if this one is still installed. Where
     another handler is installed (a node's own, for one) nothing changes. Per write: an
     increment and a decrement (a handler swapped per write cost 14-21 us, tripling a write).
