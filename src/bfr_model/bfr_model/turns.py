@@ -119,7 +119,8 @@ class TurnUnwrapper:
         """
         if not math.isfinite(theta):
             return theta + self.offset
-        if self.last is not None:
+        # a step under half a turn is no wrap (_is_wrap's rounding): the per-sample path
+        if self.last is not None and abs(theta - self.last[0]) > math.pi:
             th0, t0, w0 = self.last
             k = _is_wrap(th0, theta, 0.5 * (w0 + theta_dot) * (t - t0))
             if k:
