@@ -70,7 +70,9 @@ def answered(bag: str, inputs: str, answers: str, since: float, duration: float
     span = (t1 - t0) / 1e9
     assert span >= duration - 0.5, f"{inputs} and {answers} recorded together {span:.2f} s"
     x, y = x[(x >= t0) & (x <= t1)], y[(y >= t0) & (y <= t1)]
-    assert np.isin(y, x).mean() > 0.98, f"{answers}: stamps of no {inputs}"
+    # > 0.95: a clean-clone CI measured 97.5 % (the recorder missing best-effort samples on
+    # the loaded machine; 99.7-100 % alone); a loop that stamped its states otherwise has ~0
+    assert np.isin(y, x).mean() > 0.95, f"{answers}: stamps of no {inputs}"
     hit = np.isin(x, y)
     # each input's time since the last answered one (0 for an answered input)
     last = np.maximum.accumulate(np.where(hit, x, x[0]))
