@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import select
 import shutil
 import signal
 import subprocess
@@ -298,7 +299,8 @@ def test_sigint_recorder_loses_nothing(mode: str, trials: int, tmp_path: Path) -
     outs = []
     try:
         for proc in procs:
-            assert proc.stdout is not None
+            assert proc.stdout is not None  # "ready" within a minute, or the test fails
+            assert select.select([proc.stdout], [], [], 60.0)[0], "the writer never started"
             assert proc.stdout.readline().strip() == "ready"
             time.sleep(0.3)
             proc.send_signal(signal.SIGINT)

@@ -154,14 +154,15 @@ def test_rig_names_a_node_that_dies_early(tmp_path: Path,
 
 def test_realtime_rig_runs_the_loop_composed_and_pinned(tmp_path: Path) -> None:
     """``bfr rig --realtime``: the camera and controller composed in one process (loop_node)
-    pinned to the last CPU; the ball rolls and the recorder loses nothing."""
+    pinned to the last CPU; the ball rolls and the recorder loses nothing its publishers
+    still hold (all but a few commands at most, the last one always)."""
     from bfr_tools.rig import loop_cpu_default  # noqa: PLC0415
 
     log_dir = tmp_path / "logs"
     args = _parser().parse_args(["--realtime", "--duration", "6", "--log-dir", str(log_dir),
                                  "--wall-timeout", "300"])
-    summary, _, _, wall = run_rig(args)
-    assert summary is not None
+    summary, _, bag, wall = run_rig(args)
+    assert summary is not None and bag is not None
     print(format_summary(summary, wall))
     assert summary["kept_rolling"] and summary["rolling_from"] < 0.1, summary
     assert not (log_dir / "camera.log").exists() and not (log_dir / "controller.log").exists()
@@ -170,8 +171,17 @@ def test_realtime_rig_runs_the_loop_composed_and_pinned(tmp_path: Path) -> None:
     cpu = loop_cpu_default()
     assert (f"CPU {cpu} only (" if cpu >= 0 else "any CPU") in log
     published = summary["published"]
-    for topic in ("/ball_observation", "/controller_state", "/effort_controller/commands",
-                  "/joint_states", "/camera/camera_info", "/sim_truth"):
+    for topic in ("/ball_observation", "/controller_state", "/joint_states",
+                  "/camera/camera_info", "/sim_truth"):  # histories of 0.5-5 s: every one
         assert summary["topics"][topic]["count"] == published[topic], topic
+    # The commands' publisher keeps the last 10 (50 ms at 200 Hz: COMMAND_QOS, for the
+    # motor's reliable reader), so a recorder starved for longer on a loaded 2-CPU machine
+    # can miss a few it cannot have repaired (the final clean-clone CI of fe2f276: 1200 of
+    # 1202); at most 0.5 %, and never the zero published on exit (flushed: it must be last).
+    cmd = "/effort_controller/commands"
+    assert 0.995 * published[cmd] <= summary["topics"][cmd]["count"] <= published[cmd]
+    store = make_typestore()
+    last = [m for m in read_bag_messages(bag).messages if m.topic == cmd][-1]
+    assert list(store.deserialize_cdr(last.data, last.msgtype).data) == [0.0]
     frames = summary["topics"]["/camera/camera_info"]["count"]
     assert summary["topics"]["/ball_observation"]["count"] >= 0.97 * frames
