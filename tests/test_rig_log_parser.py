@@ -493,3 +493,77 @@ def test_epoch_stamps_read_as_the_same_log_from_zero(tmp_path: Path) -> None:
         p0.info["camera_clock"]["period_s"], rel=1e-8)
     lag0 = r0.meta["sensor_timing"]["velocity_lag"]["lag_s"]
     assert r1.meta["sensor_timing"]["velocity_lag"]["lag_s"] == pytest.approx(lag0, abs=1e-6)
+
+
+def _dialect_line(std: str, form: str, k: int) -> str:
+    """``std`` (a data line of the NTNU rig's form) in another logger's form ``form``."""
+    fields = dict(f.split("=", 1) for f in std.strip().removeprefix("[inf] ").split(","))
+    order = list(fields)
+    if form == "reordered":
+        order = ["t", "x", "y", "theta", "dtheta", "phi", "dphi", "torque"]
+    elif form == "extra_mid":
+        fields["mode"], order = "2", ["t", "mode", *order[1:]]
+    elif form == "extra_end":
+        fields["u_ref"], order = f"{0.5 + k:g}", [*order, "u_ref"]
+    sep = ", " if form == "spaces" else ","
+    text = sep.join(f"{key}={fields[key]}" for key in order)
+    prefix = {"none": "", "dbg": "[dbg] ",
+              "stamped": f"2021-05-01 18:05:{19 + k // 1000:02d}.{k % 1000:03d} INFO "
+              }.get(form, "[inf] ")
+    return prefix + text + "\r"
+
+
+@pytest.mark.parametrize("form", ["reordered", "extra_mid", "extra_end", "spaces", "none",
+                                  "dbg", "stamped"])
+def test_another_loggers_form_is_read_by_key_and_said(tmp_path: Path, form: str) -> None:
+    """Another rig's logger: another tag or a time stamp before the fields, the keys in
+    another order, spaces after the commas, fields of its own. Read by key into the same
+    numbers as the NTNU rig's form; the recording says which form it read and which fields
+    it did not use. Every run and its marker kept (two runs, clock restarting)."""
+    runs = [body(300), body(200, t0=1.0)]
+    std = "\n".join([*NOISE, *runs[0], "[inf] initializing hardware..\r", *runs[1]]) + "\n"
+    k = iter(range(10 ** 6))
+    other = "\n".join([*NOISE, *(_dialect_line(s, form, next(k)) for s in runs[0]),
+                       "[inf] initializing hardware..\r",
+                       *(_dialect_line(s, form, next(k)) for s in runs[1])]) + "\n"
+    path = tmp_path / "other.txt"
+    path.write_text(other)
+    ref = parse_rig_log_text(std, "mem")
+    for log in (parse_rig_log(path), parse_rig_log_text(other, "mem")):
+        assert len(log.runs) == 2 and log.warnings == []
+        for a, b in zip(log.runs, ref.runs, strict=True):
+            np.testing.assert_array_equal(a.data, b.data)
+        (said,) = log.conversions
+        assert "read by key" in said
+        assert ("mode" in said) is (form == "extra_mid")
+        assert ("field(s) not used: u_ref" in said) is (form == "extra_end")
+        assert ("time stamp" in said) is (form == "stamped")
+    rec = read_rig_log(path, run=0)
+    assert said in rec.meta["conversions"] and len(rec) == 300
+
+
+def test_another_loggers_damaged_lines_are_accounted() -> None:
+    """In another logger's form a damaged line is lost and counted as in the rig's: a value
+    that is not a number, a field missing, the file's last line cut short."""
+    lines = [_dialect_line(s, "extra_mid", 0) for s in body(40)]
+    lines[10] = lines[10].replace("theta=", "theta=x", 1)
+    lines[20] = lines[20].replace(",dphi=0.4", "")
+    lines[-1] = lines[-1][:30]
+    log = parse_rig_log_text("\n".join(lines) + "\n", "mem")
+    acc = log.runs[0].account
+    assert dict(acc.dropped) == {"corrupt": 2, "truncated": 1}
+    assert acc.samples_used == 37
+    assert any("mem:11: value of 'theta' is not a number" in w for w in log.warnings)
+    assert any(w.startswith("mem:21: malformed data line skipped: fields t,mode,torque")
+               for w in log.warnings), log.warnings
+    assert any("mem:40: truncated final line" in w for w in log.warnings), log.warnings
+
+
+def test_the_rig_form_stays_the_rule_beside_a_few_other_lines() -> None:
+    """A log mostly in the NTNU rig's form is read by it; a few lines of another form among
+    them are damaged lines (counted), not a reason to read the log otherwise."""
+    lines = body(50)
+    lines[5] = _dialect_line(lines[5], "reordered", 0)
+    log = parse_rig_log_text("\n".join(lines) + "\n", "mem")
+    assert log.conversions == [] and log.runs[0].account.samples_used == 49
+    assert dict(log.runs[0].account.dropped) == {"corrupt": 1}

@@ -24,6 +24,14 @@ account and the notes with the first line, and the read refused past 1 % of the 
 (:func:`parse_rig_log`); stamps counting from an epoch are rebased to the run's first
 (:data:`EPOCH_STAMPS`).
 
+Another rig's logger may print the same fields otherwise: another tag or a time stamp before
+them (``[dbg] t=...``, ``2021-05-01 18:05:19.123 INFO t=...``, none), the keys in another
+order, spaces after the commas, fields of its own (``mode=2``, ``u_ref=0.5``). The data lines'
+form is read off the file itself (:class:`LineDialect`, the most common form of the
+``key=value`` lines holding every key of :data:`KEYS` among the first lines): the values are
+taken by key, other fields are left out, and ``meta["conversions"]`` says which form was
+read and which fields were not used. The NTNU rig's own form is read by the fast path above.
+
 The conventions of the format were inferred from the NTNU rig's logs
 (docs/ntnu-rig-conventions.md, ``python -m bfr_model.io.rig_conventions``) and are applied by
 :func:`run_to_recording`. What is a fact of one rig (its timing) is never assumed: it is
@@ -87,6 +95,7 @@ from bfr_model.recording import Recording
 __all__ = [
     "KEYS",
     "MAX_PHI_THETA_LAG",
+    "LineDialect",
     "RigLog",
     "RigLogError",
     "RigLogWarning",
@@ -119,6 +128,94 @@ _DATA_RE = re.compile(
     r"dtheta=([^,]*),dphi=([^,]*),x=([^,]*),y=([^,]*)")
 _ANSI_RE = re.compile(r"\x1b\][^\x07\x1b]*(?:\x07|\x1b\\)?|\x1b\[[0-?]*[ -/]*[@-~]|\x1b[@-_]")
 _CTRL_RE = re.compile(r"[\x00-\x08\x0b-\x1f\x7f]")
+#: A ``key=value`` line of any form: text without ``=`` before the first key, then fields
+#: separated by commas (blanks after a comma allowed). Only for finding a log's form.
+_FIELDS_RE = re.compile(
+    r"(?P<prefix>[^=]*?)(?P<body>[A-Za-z_]\w*=[^,]*(?:,\s*[A-Za-z_]\w*=[^,]*)+)")
+#: Lines (at most, and within the file's first bytes) looked at to find the form of a
+#: log's data lines (:func:`LineDialect.find`).
+DIALECT_LINES = 5000
+DIALECT_BYTES = 1 << 20
+
+
+@dataclass(frozen=True, kw_only=True)
+class LineDialect:
+    """The form of a log's data lines when it is not the NTNU rig's (module docstring).
+
+    Attributes
+    ----------
+    prefix : str or None
+        Text before the first key on every data line (``"[dbg] "``, ``""``); None when it
+        varies from line to line (a time stamp): any text without ``=``.
+    keys : tuple of str
+        The keys of a data line in the file's order: every one of :data:`KEYS`, and the
+        logger's own fields (not used).
+    """
+
+    prefix: str | None
+    keys: tuple[str, ...]
+
+    @property
+    def regex(self) -> re.Pattern[str]:
+        """A data line of this form; one group per key, in the file's order."""
+        head = "[^=]*?" if self.prefix is None else re.escape(self.prefix)
+        fields = r",\s*".join(f"{re.escape(k)}=([^,]*)" for k in self.keys)
+        return re.compile(rf"{head}{fields}\s*")
+
+    @property
+    def order(self) -> tuple[int, ...]:
+        """Group index (0-based) of each of :data:`KEYS`."""
+        return tuple(self.keys.index(k) for k in KEYS)
+
+    @property
+    def unused(self) -> tuple[str, ...]:
+        """The logger's own fields, not read."""
+        return tuple(k for k in self.keys if k not in KEYS)
+
+    def describe(self) -> str:
+        """What the reader says it did (``meta["conversions"]``)."""
+        head = ("a time stamp or other text before the first key" if self.prefix is None
+                else f"prefix {self.prefix!r}" if self.prefix else "no prefix")
+        unused = (f"; field(s) not used: {', '.join(self.unused)}" if self.unused
+                  else "")
+        return (f"data lines read by key in this log's form (not the NTNU rig's '[inf] "
+                f"t=...,torque=...'): {head}, keys {','.join(self.keys)}{unused}")
+
+    @classmethod
+    def find(cls, lines: Iterable[str]) -> LineDialect | None:
+        """The form of the data lines among ``lines``; None for the NTNU rig's own form.
+
+        The most common ``key=value`` form whose keys include every one of :data:`KEYS`
+        (each once); its prefix is the one all its lines share, else None (any text). None
+        also when no line has every key (the reader then says what it found).
+        """
+        forms: Counter[tuple[str, ...]] = Counter()
+        prefixes: dict[tuple[str, ...], set[str]] = {}
+        standard = 0
+        for raw in lines:
+            line = raw.rstrip("\r")
+            if _DATA_RE.fullmatch(line):
+                standard += 1
+                continue
+            m = _FIELDS_RE.fullmatch(_clean_terminal_line(line))
+            if m is None:
+                continue
+            keys = tuple(f.split("=", 1)[0].strip() for f in m["body"].split(","))
+            if len(set(keys)) != len(keys) or not set(KEYS) <= set(keys):
+                continue
+            forms[keys] += 1
+            prefixes.setdefault(keys, set()).add(m["prefix"])
+        if not forms:
+            return None
+        keys, count = forms.most_common(1)[0]
+        if standard >= count:
+            return None
+        seen = prefixes[keys]
+        return cls(prefix=next(iter(seen)) if len(seen) == 1 else None, keys=keys)
+
+    def looks_like_data(self, line: str) -> bool:
+        """At least half of this form's keys (as ``key=``) in ``line``: a damaged data line."""
+        return sum(f"{k}=" in line for k in self.keys) >= len(self.keys) // 2 + 1
 
 
 class RigLogError(ValueError):
@@ -376,11 +473,14 @@ class _LogScan:
         Line numbers of unrecognised (``terminal``) lines since the current run's latest
         data line: garbage if another data line of the run follows, else terminal output
         (a prompt after the program stopped).
+    dialect : LineDialect or None
+        The form of the data lines when it is not the NTNU rig's.
     """
 
     source: str
     duplicates: str = "drop"
     gates: Gates | None = None
+    dialect: LineDialect | None = None
     current: _RunRows = field(default_factory=_RunRows)
     runs: list[RigRun] = field(default_factory=list)
     skipped: Counter[str] = field(default_factory=Counter)
@@ -541,6 +641,9 @@ def _scan_line(scan: _LogScan, raw: str, lineno: int) -> None:
     another, so there a carriage return ends a line.
     """
     line = raw[:-1] if raw.endswith("\r") else raw
+    if scan.dialect is not None:
+        _scan_dialect_line(scan, scan.dialect, line, lineno)
+        return
     m = _DATA_RE.fullmatch(line)
     if m is not None:
         scan.resolve_partial(final=False)
@@ -592,6 +695,77 @@ def _scan_line(scan: _LogScan, raw: str, lineno: int) -> None:
         scan.pending_partial = (lineno, "cut inside the line's prefix", scan.current)
     else:
         scan.add_noise(lineno)
+
+
+def _scan_dialect_line(scan: _LogScan, dialect: LineDialect, line: str, lineno: int) -> None:
+    """:func:`_scan_line` for a log whose data lines have another form (:class:`LineDialect`).
+
+    A data line is read by key (escape codes and carriage returns removed as a terminal
+    would); a line with half of the keys or more is a damaged data line (``corrupt``, or
+    the file's ``truncated`` last line when its keys are the first of a data line's);
+    ``[inf]`` / ``[obs]`` lines and other text as in the NTNU rig's logs.
+    """
+    regex = _dialect_regex(dialect)
+    m = regex.fullmatch(line)
+    clean = line if m is not None else _clean_terminal_line(line)
+    if m is None:
+        m = regex.fullmatch(clean)
+    if m is not None:
+        scan.resolve_partial(final=False)
+        scan.last_nonblank = lineno
+        groups = m.groups()
+        scan.add_data(tuple(groups[i] for i in dialect.order), lineno)
+        return
+    if clean:
+        scan.resolve_partial(final=False)
+        scan.last_nonblank = lineno
+    found = _dialect_fields(dialect, clean)
+    if not clean:
+        scan.skipped["empty"] += 1
+    elif (found and len(found) <= len(dialect.keys) and found[:-1] == dialect.keys[:len(found) - 1]
+          and dialect.keys[len(found) - 1].startswith(found[-1])):
+        scan.pending_partial = (lineno, f"cut after {len(found) - 1} complete field(s) of the "
+                                f"{len(dialect.keys)} expected", scan.current)
+    elif dialect.looks_like_data(clean):
+        detail = f"fields {','.join(found)} where {','.join(dialect.keys)} expected"
+        scan.lose("corrupt", "malformed", lineno, f"{scan.source}:{lineno}: malformed data "
+                  f"line skipped: {detail}: {clean[:120]!r}", detail=detail)
+    elif clean.startswith("[obs]"):
+        scan.skipped["obs"] += 1
+    elif clean.startswith("[inf]"):
+        scan.add_info(clean[len("[inf]"):].strip())
+    else:
+        scan.add_noise(lineno)
+
+
+def _dialect_fields(dialect: LineDialect, clean: str) -> tuple[str, ...]:
+    """The keys (file order) of a line that may be a cut or damaged data line of ``dialect``.
+
+    Empty when the line does not start as the form's data lines do (its prefix, then a key).
+    """
+    if dialect.prefix is not None:
+        if not clean.startswith(dialect.prefix):
+            return ()
+        body = clean[len(dialect.prefix):]
+    else:
+        m = _FIRST_KEY_RE.search(clean)
+        if m is None:
+            return ()
+        body = clean[m.start():]
+    return tuple(f.split("=", 1)[0].strip() for f in body.split(","))
+
+
+#: Where the fields of a line begin when the prefix varies (a key, then ``=``).
+_FIRST_KEY_RE = re.compile(r"(?<![\w.])[A-Za-z_]\w*=")
+_DIALECT_REGEX: dict[LineDialect, re.Pattern[str]] = {}
+
+
+def _dialect_regex(dialect: LineDialect) -> re.Pattern[str]:
+    """:attr:`LineDialect.regex`, compiled once per form."""
+    regex = _DIALECT_REGEX.get(dialect)
+    if regex is None:
+        regex = _DIALECT_REGEX[dialect] = dialect.regex
+    return regex
 
 
 def _finish_run(raw: _RunRows, source: str, duplicates: str,
@@ -682,11 +856,14 @@ def _fill_velocity(data: NDArray[np.float64], missing: NDArray[np.bool_]) -> tup
 
 
 def _scan(lines: Iterable[str], source: str, duplicates: str,
-          gates: Gates | None) -> RigLog:
-    """One pass over ``lines`` (without their newlines); see :func:`parse_rig_log_text`."""
+          gates: Gates | None, dialect: LineDialect | None = None) -> RigLog:
+    """One pass over ``lines`` (without their newlines); see :func:`parse_rig_log_text`.
+
+    ``dialect``: the data lines' form when it is not the NTNU rig's (:class:`LineDialect`).
+    """
     if duplicates not in ("drop", "error"):
         raise ValueError(f"duplicates must be 'drop' or 'error', got {duplicates!r}")
-    scan = _LogScan(source=source, duplicates=duplicates, gates=gates)
+    scan = _LogScan(source=source, duplicates=duplicates, gates=gates, dialect=dialect)
     for lineno, raw in enumerate(lines, start=1):
         scan.n_lines = lineno
         _scan_line(scan, raw, lineno)
@@ -702,8 +879,11 @@ def _scan(lines: Iterable[str], source: str, duplicates: str,
         why = scan.dropped_runs[0].account.line() if scan.dropped_runs else "no run"
         raise RigLogError(f"{source}: no sample passed the checks ({why})")
     skipped_out = {k: v for k, v in scan.skipped.items() if v}
-    return RigLog(source=source, n_lines=scan.n_lines, n_data=scan.n_data,
-                  skipped=skipped_out, warnings=scan.warnings, runs=scan.runs)
+    log = RigLog(source=source, n_lines=scan.n_lines, n_data=scan.n_data,
+                 skipped=skipped_out, warnings=scan.warnings, runs=scan.runs)
+    if dialect is not None:
+        log.conversions.append(dialect.describe())
+    return log
 
 
 def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
@@ -747,7 +927,7 @@ def parse_rig_log_text(text: str | bytes, source: str = "<text>", *,
     lines = re.split(r"\r\n|\r|\n", text) if cr_mode else text.split("\n")
     if lines and lines[-1] == "":
         lines.pop()  # text ended with a newline
-    log = _scan(lines, source, duplicates, gates)
+    log = _scan(lines, source, duplicates, gates, LineDialect.find(lines[:DIALECT_LINES]))
     if cr_mode:
         log.conversions.append(_cr_conversion(bare_cr, lf))
     return log
@@ -816,7 +996,12 @@ def parse_rig_log(path: str | Path, *, duplicates: str = "drop",
             lf, bare_cr = _line_ends(fh)
             fh.seek(0)
             cr_mode = bare_cr > lf  # most lines end in CR alone: CR is the line end
-            log = _scan(_file_lines(fh, cr_mode), str(p), duplicates, gates)
+            head = fh.read(DIALECT_BYTES).decode("utf-8", errors="replace")
+            dialect = LineDialect.find(
+                (re.split(r"\r\n|\r|\n", head) if cr_mode else head.split("\n"))[:-1]
+                [:DIALECT_LINES])
+            fh.seek(0)
+            log = _scan(_file_lines(fh, cr_mode), str(p), duplicates, gates, dialect)
         if cr_mode:
             log.conversions.append(_cr_conversion(bare_cr, lf))
     except OSError as exc:
