@@ -155,6 +155,19 @@ def test_controller_node_keeps_the_ball_rolling_and_stops_safely(
         rig.frame(ctl)
     assert rig.states[-1].mode == BALL_LOST and rig.cmds[-1] == 0.0
     assert "BALL_LOST at t = " in ctl.output() and "no valid ball fix" in ctl.output()
+    # ... also through an encoder fault: FAULT, and when good samples come back (the ball in
+    # view) BALL_LOST again, never WAITING or ROLLING (a stand-in's 0.3 s encoder gap once
+    # re-armed the motor without anybody asking)
+    t_bad = rig.t_ns + MS
+    rig.clock(t_bad)
+    rig.joint_state(t_bad, theta=math.nan)
+    assert h.spin_until(lambda: rig.states[-1].mode == FAULT, timeout=10.0), ctl.output()[-2000:]
+    rig.t_ns = t_bad
+    for _ in range(20):
+        rig.frame(ctl)
+    assert set(rig.modes_since(t_bad - 1)) == {FAULT, BALL_LOST}, rig.modes_since(t_bad - 1)
+    assert rig.states[-1].torque == 0.0 and rig.cmds[-1] == 0.0
+    assert "the controller stays BALL_LOST (latched" in ctl.output()
     # ~/reset re-arms it
     client = h.node.create_client(Trigger, "/controller/reset")
     assert client.wait_for_service(timeout_sec=10.0)

@@ -22,7 +22,8 @@ Safety, in the node whatever the core does:
   source: ``-p actuator.torque_limit:=0.05`` lowers it) and is exactly 0 unless the mode is
   ROLLING (WAITING, BALL_LOST and FAULT all command zero);
 - BALL_LOST (no valid fix for ``supervisor.lost_timeout``, the ball stopped or far from the
-  orbit) is latched: zero torque until the node is restarted or ``~/reset`` is called;
+  orbit) is latched: zero torque until the node is restarted or ``~/reset`` is called (a
+  FAULT that comes and goes meanwhile does not re-arm it);
 - with the observation trigger a joint_states sample ``loop.max_step_gap`` after the last
   step runs a step anyway (taken within ``max_step_gap / 2``), so a dead camera is noticed
   in time;
@@ -377,10 +378,14 @@ class ControllerNode(Node):
             return
         self.js_clock_ns = now
         if self.fault and not self.exception_fault:
+            # a latched BALL_LOST outlives the fault: only ~/reset or a restart re-arms
+            latched = self.ctrl.mode == BALL_LOST
             self.get_logger().info(f"{self.js_sub.topic_name} good again after: {self.fault}; "
-                                   f"controller restarts in WAITING")
+                                   + (_STAYS_LOST if latched
+                                      else "controller restarts in WAITING"))
             self.fault = ""
-            self.ctrl.reset()
+            if not latched:
+                self.ctrl.reset()
             self.pending.clear()
             self.last_step_ns = None
         if self.js is not None and got[0] <= self.js[0]:
@@ -506,7 +511,8 @@ class ControllerNode(Node):
         self.stats["steps"] += 1
         if self.exception_fault:  # a clean step: out of the exception's FAULT
             self.get_logger().info(f"a control step ran cleanly again after: {self.fault}; "
-                                   f"controller restarts in WAITING")
+                                   + (_STAYS_LOST if self.ctrl.mode == BALL_LOST
+                                      else "controller restarts in WAITING"))
             self.fault = ""
             self.exception_fault = False
         # the core clamps to the actuator's limit; the node only refuses a non-finite value
@@ -648,6 +654,10 @@ class ControllerNode(Node):
                                                  self.state_pub.topic_name: s["states"]}))
         if isinstance(self.js_sub, PolledSubscription):
             self.js_sub.destroy()
+
+
+#: What the node says when a fault ends while the ball's loss is latched.
+_STAYS_LOST = "the controller stays BALL_LOST (latched: restart the node or call ~/reset)"
 
 
 def main(argv: list[str] | None = None) -> int:
