@@ -197,6 +197,27 @@ def test_controller_node_keeps_the_ball_rolling_and_stops_safely(
     assert ctl.alive
 
 
+def test_controller_node_names_the_joints_that_came_instead_of_its_own(
+        ros_harness: rosutil.RosHarness, node_processes) -> None:  # noqa: ANN001
+    """A driver whose frame joint is named otherwise: no step, no torque, and the warning
+    says which joints arrived (it had said only "no joint_states received yet")."""
+    h = ros_harness
+    ctl = node_processes.start("bfr_control", "controller_node")
+    pub = h.node.create_publisher(JointState, "joint_states", 50)
+    h.wait_for_match(pub, timeout=60)
+    m = JointState()
+    m.name, m.position, m.velocity = ["joint1"], [1.0], [0.0]
+
+    def warned() -> bool:
+        m.header.stamp = h.node.get_clock().now().to_msg()
+        pub.publish(m)
+        return "arrived without joint 'frame_joint' (names ['joint1'])" in ctl.output()
+
+    assert h.spin_until(warned, timeout=40.0), ctl.output()[-2000:]
+    assert "no joint_states received yet on /joint_states" in ctl.output()
+    assert "is arriving" not in ctl.output() and ctl.alive
+
+
 def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
                                                 node_processes) -> None:  # noqa: ANN001
     h = ros_harness

@@ -18,6 +18,7 @@ from bfr_camera.camera_node import ThetaBuffer
 from bfr_camera.camera_node import node_defaults as camera_defaults
 from bfr_model.params import load_params
 from bfr_ros.node_common import (
+    JointPicker,
     _cast,
     flatten,
     image_to_array,
@@ -471,3 +472,18 @@ def test_the_simulator_runs_a_creeping_spin(params) -> None:  # noqa: ANN001
     assert abs(tr.spin_rate - rolling) > 0.1  # the spin lags its rolling
     kin, _ = sim.model.energy(sim.x)
     assert tr.kinetic == pytest.approx(float(kin))
+
+
+def test_joint_picker_takes_its_joint_and_says_what_came_without_it() -> None:
+    """The frame's joint by name (any order), a nameless single-joint message as it; other
+    joints' messages counted with their names, for the nodes' "no joint_states" warnings."""
+    pick = JointPicker("frame_joint")
+    assert pick.missing() == ""
+    assert pick.index(["wheel", "frame_joint"], (1.0, 2.0)) == 1
+    assert pick.index([], (3.0,)) == 0
+    assert pick.index([], (3.0, 4.0)) is None
+    assert pick.index(["joint1"], (5.0,)) is None
+    assert pick.others == 2
+    assert pick.missing() == ("2 message(s) arrived without joint 'frame_joint' (names "
+                              "['joint1']): is the frame's joint named otherwise? (parameter "
+                              "joint_name)")

@@ -60,6 +60,7 @@ from bfr_ros.node_common import (
     JOINT_STATES_POLLED_QOS,
     STATE_QOS,
     CdrError,
+    JointPicker,
     PolledSubscription,
     RawImage,
     Throttle,
@@ -229,6 +230,7 @@ class CameraNode(Node):
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])
         self.joint_name = str(inp["joint_name"])
+        self.joints = JointPicker(self.joint_name)
         self.theta = ThetaBuffer(float(inp["theta_max_gap"]))
         self.frame_timeout = float(inp["frame_timeout"])
         check(self.frame_timeout > 0, "input.frame_timeout",
@@ -308,13 +310,8 @@ class CameraNode(Node):
             if self.throttle("js", 2.0):
                 self.get_logger().warn(f"malformed message on {self.js_sub.topic_name}: {exc}")
             return
-        if self.joint_name in names:
-            j = names.index(self.joint_name)
-        elif not names and len(position) == 1:
-            j = 0
-        else:
-            return  # another joint's message
-        if j >= len(position):
+        j = self.joints.index(names, position)
+        if j is None or j >= len(position):  # another joint's message, or no position
             return
         theta_dot = float(velocity[j]) if j < len(velocity) else math.nan
         theta = self.turns(float(position[j]), t_ns * 1e-9, theta_dot)  # a driver's may wrap
@@ -402,8 +399,9 @@ class CameraNode(Node):
             out.phi = out.theta_used = math.nan
             if det.valid:
                 kind = why.split(" s ")[0].rstrip("0123456789.")  # without the figures
+                other = self.joints.missing() if why.startswith("no joint_states") else ""
                 text = (f"phi not computed ({why.replace('joint_states', self.js_sub.topic_name)}"
-                        f"); x, y are still valid")
+                        + (f"; {other}" if other else "") + "); x, y are still valid")
                 if kind != self.last_theta_problem or self.throttle("theta", 2.0):
                     self.get_logger().warn(text)
                 self.last_theta_problem = kind

@@ -76,6 +76,7 @@ from bfr_ros.node_common import (
     JOINT_STATES_QOS,
     STATE_QOS,
     CdrError,
+    JointPicker,
     PolledSubscription,
     Throttle,
     declare_parameter_tree,
@@ -213,6 +214,7 @@ class ControllerNode(Node):
         self.trigger = str(loop["trigger"]).lower()
         one_of("loop.trigger", self.trigger, ("observation", "joint_states", "timer"))
         self.joint_name = str(loop["joint_name"])
+        self.joints = JointPicker(self.joint_name)
         self.max_gap_ns = round(float(loop["max_step_gap"]) * _NS)
         self.actuation_delay = float(loop["actuation_delay"])
         nonnegative("loop.actuation_delay", self.actuation_delay)
@@ -311,11 +313,8 @@ class ControllerNode(Node):
             t_ns, names, position, velocity, _ = parse_joint_state(raw)
         except CdrError as exc:
             return SampleFault(f"malformed message on {self.js_sub.topic_name}: {exc}", now)
-        if self.joint_name in names:
-            j = names.index(self.joint_name)
-        elif not names and len(position) == 1:
-            j = 0
-        else:
+        j = self.joints.index(names, position)
+        if j is None:
             return None
         if j >= len(position) or j >= len(velocity):
             return SampleFault(
@@ -622,8 +621,10 @@ class ControllerNode(Node):
             if gap > 5.0 and not self.fault:
                 dropped = (f" ({self.backlog_dropped} stale sample(s) dropped as start-up "
                            f"backlog)" if self.backlog_dropped else "")
+                other = self.joints.missing()
                 self.get_logger().warn(f"no joint_states received yet on "
-                                       f"{self.js_sub.topic_name}{dropped}",
+                                       f"{self.js_sub.topic_name}{dropped}"
+                                       + (f"; {other}" if other else ""),
                                        throttle_duration_sec=10.0)
             return
         if gap > self.watchdog_timeout:  # stamped now: the check is the measurement

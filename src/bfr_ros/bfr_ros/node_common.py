@@ -61,6 +61,7 @@ __all__ = [
     "STATE_QOS",
     "CdrError",
     "Interrupted",
+    "JointPicker",
     "PolledSubscription",
     "RawImage",
     "StopFlag",
@@ -964,6 +965,41 @@ def turn_unwrapper(node: Any, topic: str) -> TurnUnwrapper:
                                f"docs/hardware.md: it accumulates); unwrapped here")
 
     return TurnUnwrapper(on_first_wrap=said)
+
+
+class JointPicker:
+    """Which entry of a ``joint_states`` message is the frame's joint; what came without it.
+
+    The entry named ``name``; a message without names and with one position is taken as
+    that joint's. Messages of other joints only (a driver that publishes each joint apart)
+    are left out and counted, with the names of the last one, so that a node waiting for
+    its joint can say why (a joint named otherwise than ``name``).
+    """
+
+    __slots__ = ("name", "names_seen", "others")
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.others = 0                      # messages without the joint
+        self.names_seen: tuple[str, ...] = ()  # the names of the last of them
+
+    def index(self, names: list[str], position: tuple[float, ...]) -> int | None:
+        """The joint's index in the message; None for a message without it (counted)."""
+        if self.name in names:
+            return names.index(self.name)
+        if not names and len(position) == 1:
+            return 0
+        self.others += 1
+        self.names_seen = tuple(names)
+        return None
+
+    def missing(self) -> str:
+        """Why no sample of the joint came although messages did ('' if none came)."""
+        if not self.others:
+            return ""
+        return (f"{self.others} message(s) arrived without joint {self.name!r} (names "
+                f"{list(self.names_seen)}): is the frame's joint named otherwise? (parameter "
+                f"joint_name)")
 
 
 def parse_joint_state(data: bytes | memoryview) -> tuple[int, list[str], tuple[float, ...],
