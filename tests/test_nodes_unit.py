@@ -28,7 +28,7 @@ from bfr_ros.node_common import (
 )
 from bfr_sim.simulator_node import RigSimulation, Schedule
 from bfr_sim.simulator_node import node_defaults as sim_defaults
-from bfr_tools.rig import orbit_start, set_autogroup_nice
+from bfr_tools.rig import orbit_start, run_warnings, set_autogroup_nice
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -487,3 +487,33 @@ def test_joint_picker_takes_its_joint_and_says_what_came_without_it() -> None:
     assert pick.missing() == ("2 message(s) arrived without joint 'frame_joint' (names "
                               "['joint1']): is the frame's joint named otherwise? (parameter "
                               "joint_name)")
+
+
+def test_a_run_that_fell_behind_or_lost_messages_is_said() -> None:
+    """bfr rig's summary: a clean run has no warning; messages not recorded, a camera node or
+    a controller that fell behind its input (the encoder on hardware, the observations in a
+    simulation), no encoder sample at all: each a line."""
+    def summary(mode: str, **counts: int) -> dict:
+        names = {"js": "/joint_states", "obs": "/ball_observation", "st": "/controller_state",
+                 "info": "/cam/camera_info", "cmd": "/effort_controller/commands"}
+        return {"mode": mode, "topics": {names[k]: {"count": v} for k, v in counts.items()},
+                "published": {"/controller_state": counts["st"],
+                              "/effort_controller/commands": counts["cmd"] + 1}}
+
+    clean = summary("hardware", js=9500, obs=1990, st=9480, info=2000, cmd=9480)
+    clean["published"]["/effort_controller/commands"] -= 1
+    assert run_warnings(clean) == []
+    assert run_warnings(summary("lockstep", js=3600, obs=1200, st=1200, info=1200,
+                                cmd=1199)) == ["/effort_controller/commands: 1 of 1200 "
+                                               "published message(s) not recorded (the "
+                                               "bag's figures undercount the run)"]
+    slow = run_warnings(summary("hardware", js=9470, obs=323, st=4417, info=1990, cmd=4418))
+    assert slow[1:] == ["the camera node measured 323 of 1990 camera frames (16 %): it fell "
+                        "behind the camera",
+                        "the controller stepped on 4417 of 9470 encoder samples (47 %): it "
+                        "fell behind"]
+    sim = run_warnings(summary("realtime", js=3600, obs=1200, st=900, info=1200, cmd=899))
+    assert sim[-1] == "the controller stepped on 900 of 1200 ball observations (75 %): it " \
+                      "fell behind"
+    assert "no /joint_states recorded" in run_warnings(summary("hardware", js=0, obs=0, st=0,
+                                                               info=0, cmd=0))[-1]

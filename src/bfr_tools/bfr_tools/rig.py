@@ -69,7 +69,7 @@ from bfr_ros.node_common import parse_published
 from bfr_tools.run import executable_path
 
 __all__ = ["NodeSpec", "RigError", "format_summary", "main", "may_raise_priority", "orbit_start",
-           "set_autogroup_nice", "summarize_bag"]
+           "run_warnings", "set_autogroup_nice", "summarize_bag"]
 
 _NS = 1_000_000_000
 NODES = {  # name -> (package, executable)
@@ -614,6 +614,7 @@ def format_summary(s: dict[str, Any], wall: tuple[float, float] | None = None) -
         flag = ("" if pub is None or pub == d["count"]
                 else f"  ({pub - d['count']:+d} not recorded)")
         lines.append(f"  {topic:<30} {both}  {d['rate']:8.1f} Hz  {d['type']}{flag}")
+    lines += [f"warning: {w}" for w in s.get("warnings", [])]
     return "\n".join(lines)
 
 
@@ -802,7 +803,47 @@ def _bag_summary(bag: Path | None, mode: str, interrupted: bool,
         return None
     summary = summarize_bag(bag)
     summary.update(mode=mode, interrupted=interrupted, published=published_counts(nodes))
+    summary["warnings"] = [*summary["warnings"], *run_warnings(summary)]
     return summary
+
+
+#: Share of its input below which a node is said to have fallen behind (the camera node's
+#: observations per camera frame, the controller's steps per sample of its trigger).
+KEPT_UP = 0.9
+
+
+def run_warnings(s: dict[str, Any]) -> list[str]:
+    """What made a run's figures less than the whole run (``s``: a run's summary).
+
+    Messages published but not recorded (the bag's figures undercount), a camera node that
+    measured under :data:`KEPT_UP` of the camera's frames, a controller that stepped on
+    under that share of its trigger's samples (encoder samples on hardware, observations
+    in a simulation), no encoder sample at all. Each a line; none for a run that kept up.
+    """
+    topics, published = s["topics"], s.get("published", {})
+    out = [f"{topic}: {pub - topics[topic]['count']} of {pub} published message(s) not "
+           f"recorded (the bag's figures undercount the run)"
+           for topic, pub in sorted(published.items())
+           if topic in topics and topics[topic]["count"] < pub]
+
+    def count(topic: str) -> int:
+        return int(topics.get(topic, {}).get("count", 0))
+
+    if not count("/joint_states"):
+        out.append("no /joint_states recorded: no encoder sample reached the recorder")
+    frames = max((d["count"] for t, d in topics.items() if t.endswith("camera_info")),
+                 default=0)
+    seen = count("/ball_observation")
+    if frames and seen < KEPT_UP * frames:
+        out.append(f"the camera node measured {seen} of {frames} camera frames "
+                   f"({100 * seen / frames:.0f} %): it fell behind the camera")
+    trigger = "/joint_states" if s.get("mode") == "hardware" else "/ball_observation"
+    samples, steps = count(trigger), count("/controller_state")
+    if samples and steps < KEPT_UP * samples:
+        what = "encoder samples" if trigger == "/joint_states" else "ball observations"
+        out.append(f"the controller stepped on {steps} of {samples} {what} "
+                   f"({100 * steps / samples:.0f} %): it fell behind")
+    return out
 
 
 #: What the camera and controller nodes log once they are up (their start-up lines; and the
