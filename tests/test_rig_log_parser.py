@@ -369,6 +369,32 @@ def test_start_up_backlog_found_on_the_fixes_own_intervals(tmp_path: Path) -> No
     assert not back.ball_valid[:590].any() and back.ball_valid[700:].all()
 
 
+@needs_data
+@pytest.mark.parametrize("keep", [2, 3, 6])
+def test_start_up_backlog_of_a_log_under_twice_the_cameras_rate(tmp_path: Path,
+                                                               keep: int) -> None:
+    """fin.txt with every 2nd / 3rd / 6th line (461 / 307 / 154 lines a second, the camera
+    165 Hz). At 307 the replay's fixes come one per line and the camera's one per 1.86: no
+    interval under half of the median, and a probe's diagnosis had read the start-up replay
+    as 0.9 s of valid fixes (camera scale 1.07, a contour and bumps): its end is found
+    within two lines of the whole log's. At 154 every line brings a new fix, replayed or
+    not: the times cannot show a backlog and none is assumed."""
+    whole = read_rig_log(DATA / "fin.txt", warn=False)
+    lines = (DATA / "fin.txt").read_text(errors="replace").splitlines()
+    data = [k for k, ln in enumerate(lines) if "t=" in ln]
+    kept = set(data[::keep])
+    (tmp_path / "d.txt").write_text(
+        "\n".join(ln for k, ln in enumerate(lines) if k in kept or "t=" not in ln) + "\n")
+    back = read_rig_log(tmp_path / "d.txt", warn=False)
+    end = back.meta["camera_backlog_end_t"]
+    if keep < 6:
+        dt = keep * float(np.median(np.diff(whole.t)))
+        assert abs(end - whole.meta["camera_backlog_end_t"]) < 2 * dt, end
+        assert back.ball_valid.mean() == pytest.approx(whole.ball_valid.mean(), abs=0.002)
+    else:
+        assert end is None and back.meta["sensor_timing"]["backlog_fixes"] == 0
+
+
 @pytest.mark.parametrize("lag,pair", [(0.0, 0), (0.004, 3), (0.009, 8)])
 def test_velocity_lag_and_phi_pairing_measured_per_run(tmp_path: Path, lag: float,
                                                        pair: int) -> None:

@@ -1036,10 +1036,15 @@ def read_rig_log(path: str | Path, run: int | None = None, *, duplicates: str = 
 def _camera_backlog_end(new_fix_idx: NDArray[np.intp], t: NDArray[np.float64]) -> int:
     """Sample index where a start-up replay of queued camera frames ends (0 if none).
 
-    The burst is found on the fixes' own intervals, whatever the line rate
-    (:func:`bfr_model.io.timing.camera_backlog_end`).
+    The burst is found on the fixes' own intervals and the log's line interval
+    (:func:`bfr_model.io.timing.camera_backlog_end`; not in a log at the camera's rate or
+    slower, where a replayed fix comes on every line as a live one does).
     """
-    end = camera_backlog_end(t[new_fix_idx]) if new_fix_idx.size else 0
+    if not new_fix_idx.size:
+        return 0
+    steps = np.diff(t)
+    end = camera_backlog_end(t[new_fix_idx],
+                             line_period=float(np.median(steps)) if steps.size else None)
     return int(new_fix_idx[end]) if end > 0 else 0
 
 

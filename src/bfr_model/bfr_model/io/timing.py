@@ -30,8 +30,15 @@ is then irrelevant to any use of v (a shift of a constant changes nothing).
 Camera backlog (:func:`camera_backlog_end`). A camera that queued frames since program start
 delivers them at the logger's rate when the loop starts: fixes arrive faster than the camera
 can take them. The steady interval between fixes is the median interval over the second half
-of the run; the backlog is the initial burst of intervals shorter than half of it. A log in
-which every line brings a new fix at the camera's own rate has no burst and no backlog.
+of the run; the backlog is the initial burst of intervals shorter than half of it. A log
+written at under twice the camera's rate (every third line of the NTNU rig's 920 Hz: the
+replay's fixes one per 3.3 ms line, the camera's one per 1.86 lines) has no interval under
+half of the median: there the burst is the run's first fixes arriving one per line at 1.5
+times the camera's mean rate or more, and it ends where the fixes' median interval over
+``steady`` of them comes within 15 % of the camera's mean (the first fixes of that window that
+still came one per line counted to the burst). A log at the camera's rate or slower (a new
+fix on every line whether replayed or not) shows no burst in its times: no backlog is found
+there, and none is assumed.
 
 Camera clock (:func:`camera_clock`). A log without the fixes' own stamps places each fix
 at the line where it first appears: ``t_k = t_e,k + L + q_k``, the exposure ``t_e,k``,
@@ -266,7 +273,8 @@ def corrected_velocity(t: FloatArray, theta_dot: FloatArray, tg: FloatArray, lag
     return v + c2 * savgol_filter(v, win, 3, deriv=2, delta=step)
 
 
-def camera_backlog_end(fix_t: FloatArray, steady: int = 10, min_burst: int = 10) -> int:
+def camera_backlog_end(fix_t: FloatArray, steady: int = 10, min_burst: int = 10,
+                       line_period: float | None = None) -> int:
     """Index (into ``fix_t``) of the first fix after a start-up backlog; 0 when there is none.
 
     Parameters
@@ -277,6 +285,9 @@ def camera_backlog_end(fix_t: FloatArray, steady: int = 10, min_burst: int = 10)
         Intervals in a row at the steady pace that end the burst.
     min_burst : int
         Fewest fast intervals that make a burst.
+    line_period : float, optional
+        The log's line interval [s]: with it, a burst of one fix per line at 1.5-2 times the
+        camera's rate is found too (module docstring).
 
     Returns
     -------
@@ -292,13 +303,40 @@ def camera_backlog_end(fix_t: FloatArray, steady: int = 10, min_burst: int = 10)
         return 0
     fast = gaps < 0.5 * typical
     if np.count_nonzero(fast[:4 * min_burst]) < min_burst:
-        return 0
+        return _burst_at_line_rate(gaps, steady, min_burst, line_period)
     ok = (~fast).astype(np.int64)
     run = np.convolve(ok, np.ones(steady, np.int64), mode="valid")
     j = np.nonzero(run == steady)[0]
     if j.size == 0:
         return 0  # never settles: not a backlog, the camera is simply irregular
     return int(j[0] + 1)
+
+
+def _burst_at_line_rate(gaps: FloatArray, steady: int, min_burst: int,
+                        line_period: float | None) -> int:
+    """:func:`camera_backlog_end` for a log at 1.5-2 times the camera's rate (module docstring).
+
+    The first ``min_burst`` intervals one line each (their median within 25 % of
+    ``line_period``, a line's jitter allowed) and their median under 2/3 of the camera's mean
+    interval (the second half's); the end where the median of ``steady`` intervals reaches
+    85 % of it, the window's leading intervals of one line (under 1.5 lines) counted to the
+    burst. 0 without ``line_period`` or such a start.
+    """
+    if line_period is None or not line_period > 0.0 or gaps.size < 2 * (min_burst + steady):
+        return 0
+    camera = float(np.mean(gaps[gaps.size // 2:]))
+    head = float(np.median(gaps[:min_burst]))
+    if head > 1.25 * line_period or not camera > 0.0 or head > camera / 1.5:
+        return 0
+    # the median over gaps[i:i+steady] (one long pause, a log's lone first line, is no pace)
+    pace = np.median(np.lib.stride_tricks.sliding_window_view(gaps, steady), axis=1)
+    j = np.nonzero(pace >= 0.85 * camera)[0]
+    if j.size == 0:
+        return 0
+    i = int(j[0])
+    while i < j[0] + steady and gaps[i] < 1.5 * line_period:
+        i += 1
+    return i + 1 if i < gaps.size else 0
 
 
 def line_rate(t: FloatArray) -> float:
