@@ -465,6 +465,29 @@ def test_node_suite_simulation_is_clean(tmp_path: Path) -> None:
         s["verdict"]
 
 
+def test_a_value_the_final_fit_ran_to_a_bound_is_a_suspect() -> None:
+    """A bump whose height the final refit ran to the library's limit (-2.999978 mm, just
+    inside the plausibility range's 3 mm; a frame-held probe had it written into
+    corrected_params.yaml) is a suspect, said why; one at a bound it started at (a Coulomb
+    friction of 0, its start) and a value inside are not."""
+    from bfr_diagnose.api import _suspects  # noqa: PLC0415 - the rule under test
+
+    base = load_params()
+    prob = SimpleNamespace(base=base)
+    bump, coulomb = EFFECTS["track_bumps"], EFFECTS["joint_coulomb_friction"]
+
+    def suspects(h: float) -> dict[str, str]:
+        fit = Fit(effects=["track_bumps", "joint_coulomb_friction"],
+                  values=[np.array([1.0, h, 0.1]), np.array([0.0])], sensors=[],
+                  cost_train=1.0, cost_test=1.0, n_params=bump.k + coulomb.k)
+        return _suspects(prob, SimpleNamespace(final=fit, parameters=[]), base)
+
+    assert suspects(-0.0015) == {}
+    (why,) = suspects(bump.lower[1] + 2.2e-8).values()  # the probe's -2.999978 mm
+    assert why.startswith("track_bumps.h at its lower bound -0.003: the fit stopped at the "
+                          "library's limit")
+
+
 def test_cli_outputs_and_suspects_stay_out_of_the_corrected_parameters(tmp_path: Path
                                                                       ) -> None:
     """Outputs written; a fitted value outside its plausibility range (a 30 % heavier ball)

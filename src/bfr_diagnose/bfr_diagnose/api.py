@@ -44,6 +44,7 @@ from bfr_diagnose.identify import (
     Part,
     Problem,
     Selection,
+    at_bounds,
     between_recordings,
     effective_samples,
     select_effects,
@@ -297,7 +298,7 @@ def _diagnose(recordings: list[tuple[str, list[Recording]]], base: RigParams,
     sel = select_effects(prob, null.thresholds, sensors0, null.tau,
                          part_thresholds=null.part_thresholds,
                          max_effects=opts.max_effects, only=opts.only, progress=say)
-    suspects = _suspects(sel, base)
+    suspects = _suspects(prob, sel, base)
     corrected, _ = apply_effects(base, [(EFFECTS[n], v) for n, v in
                                         zip(sel.final.effects, sel.final.values, strict=True)
                                         if n not in suspects])
@@ -418,14 +419,21 @@ def _rms(msq: np.ndarray) -> float | None:
 # -- plausibility, verdict, notes -------------------------------------------------------------
 
 
-def _suspects(sel: Selection, base: RigParams) -> dict[str, str]:
+def _suspects(prob: Problem, sel: Selection, base: RigParams) -> dict[str, str]:
     """Why each fitted effect is physically implausible, by name (the plausible are absent).
 
+    Implausible: outside its plausibility range, or at a bound of the fit (the final refit
+    ran a value to the library's limit: where the fit stopped, not a measurement; a
+    frame-held probe had written a bump of -3.000 mm, the bound, into corrected_params.yaml).
     Also marks each row of ``sel.parameters`` with ``plausible``.
     """
     out = {}
+    bounds = at_bounds(prob, sel.final)
     for name, vals in zip(sel.final.effects, sel.final.values, strict=True):
         why = plausibility(name, display_values(EFFECTS[name], vals), base)
+        if not why and name in bounds:
+            why = (f"{bounds[name]}: the fit stopped at the library's limit, so the value is "
+                   "not measured (the data would have it further)")
         if why:
             out[name] = why
     for p in sel.parameters:
@@ -435,6 +443,7 @@ def _suspects(sel: Selection, base: RigParams) -> dict[str, str]:
 
 def _verdict(chosen: list[str], suspects: dict[str, str], significant_loc: bool) -> str:
     """One sentence: what the nominal model leaves out, or that nothing significant is."""
+    chosen = list(dict.fromkeys(chosen))  # an effect chosen twice (two bumps) named once
     good = [n for n in chosen if n not in suspects]
     bad = [n for n in chosen if n in suspects]
     if good:

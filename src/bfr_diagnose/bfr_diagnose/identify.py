@@ -137,7 +137,8 @@ from bfr_diagnose.effects import (
 from bfr_diagnose.preprocess import SensorCorrection
 from bfr_diagnose.residual import ResidualEvaluator
 
-__all__ = ["DISAGREE_Z", "Fit", "LinearScreen", "Part", "Problem", "Selection", "autocorr_time",
+__all__ = ["DISAGREE_Z", "Fit", "LinearScreen", "Part", "Problem", "Selection", "at_bounds",
+           "autocorr_time",
            "between_recordings", "effective_samples", "linear_gain", "select_effects"]
 
 FloatArray = NDArray[np.float64]
@@ -1528,8 +1529,12 @@ def _offsets(fit: Fit) -> FloatArray:
 RESOLVED_Z = 5.0
 
 
-def _at_bound(prob: Problem, fit: Fit) -> tuple[str, str] | None:
-    """The first effect with a parameter at a bound it did not start at, and why, or None."""
+def at_bounds(prob: Problem, fit: Fit) -> dict[str, str]:
+    """Each effect with a parameter at a fit bound it did not start at, and why (the first).
+
+    Such a value is where the fit stopped, not a measurement: the data would have it further.
+    """
+    out: dict[str, str] = {}
     for name, vals in zip(fit.effects, fit.values, strict=True):
         eff = EFFECTS[name]
         x0 = np.asarray(eff.start(prob.base), float)
@@ -1537,10 +1542,18 @@ def _at_bound(prob: Problem, fit: Fit) -> tuple[str, str] | None:
         tol = 1e-3 * (hi - lo)
         for j, v in enumerate(np.asarray(vals, float)):
             if v - lo[j] < tol[j] and x0[j] - lo[j] >= tol[j]:
-                return name, f"{name}.{eff.names[j]} at its lower bound {lo[j]:.3g}"
-            if hi[j] - v < tol[j] and hi[j] - x0[j] >= tol[j]:
-                return name, f"{name}.{eff.names[j]} at its upper bound {hi[j]:.3g}"
-    return None
+                out[name] = f"{name}.{eff.names[j]} at its lower bound {lo[j]:.3g}"
+            elif hi[j] - v < tol[j] and hi[j] - x0[j] >= tol[j]:
+                out[name] = f"{name}.{eff.names[j]} at its upper bound {hi[j]:.3g}"
+            else:
+                continue
+            break
+    return out
+
+
+def _at_bound(prob: Problem, fit: Fit) -> tuple[str, str] | None:
+    """The first effect with a parameter at a bound it did not start at, and why, or None."""
+    return next(iter(at_bounds(prob, fit).items()), None)
 
 
 def _degenerate(prob: Problem, fit: Fit, max_corr: float) -> str | None:
