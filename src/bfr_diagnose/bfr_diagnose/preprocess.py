@@ -718,7 +718,8 @@ def _frame_angle(rec: Recording, tg: FloatArray, cfg: PrepConfig, res: float) ->
     if res > cfg.coarse_theta:
         if cfg.dtheta_delay is None:
             vl = velocity_lag(rec.t, rec.theta, rec.theta_dot)
-            lag = {**vl.to_json(), "how": "measured on this recording"}
+            lag = {**vl.to_json(), "how": "measured on this recording" if vl.identified else
+                   "not identified on this recording, the velocity hardly varying: none"}
             delay, c2 = vl.lag, vl.c2
         else:
             delay, c2 = float(cfg.dtheta_delay), float(cfg.dtheta_c2)
