@@ -87,6 +87,14 @@ def test_ball_lost_mid_run_zeroes_the_torque(controller: OrbitalController) -> N
     assert np.all(res.u[lost] == 0.0)
     assert np.all(res.mode[(res.t > 0.1) & (res.t < 1.5)] == 1)
     assert "no valid ball fix" in res.summary()["lost_reason"]
+    # a node's fault recovery resets with keep_lost: the latch and its reason stay; the
+    # operator's reset (keep_lost False) re-arms
+    reason, at = controller.reason, controller.lost_at
+    controller.reset(keep_lost=True)
+    assert (controller.mode, controller.reason, controller.lost_at) == (BALL_LOST, reason, at)
+    assert not controller.estimator.initialized
+    controller.reset()
+    assert controller.mode == WAITING and controller.lost_at is None
 
 
 def test_bad_frames_are_survived(controller: OrbitalController) -> None:

@@ -517,3 +517,11 @@ def test_a_run_that_fell_behind_or_lost_messages_is_said() -> None:
                       "fell behind"
     assert "no /joint_states recorded" in run_warnings(summary("hardware", js=0, obs=0, st=0,
                                                                info=0, cmd=0))[-1]
+    # the recorder outlives the loop nodes: their inputs count while they published
+    hw = summary("hardware", js=12000, obs=1990, st=9480, info=2600, cmd=9480)
+    hw["published"]["/effort_controller/commands"] -= 1
+    assert len(run_warnings(hw)) == 2
+    hw["loop_inputs"] = {"joint_states": 9500, "ball_observation": 1990, "camera_info": 2000}
+    assert run_warnings(hw) == []
+    del hw["topics"]["/controller_state"]  # published, none recorded: the worst loss
+    assert run_warnings(hw)[0].startswith("/controller_state: 9480 of 9480 published")

@@ -593,3 +593,39 @@ def test_the_rig_form_stays_the_rule_beside_a_few_other_lines() -> None:
     log = parse_rig_log_text("\n".join(lines) + "\n", "mem")
     assert log.conversions == [] and log.runs[0].account.samples_used == 49
     assert dict(log.runs[0].account.dropped) == {"corrupt": 1}
+
+
+def test_a_loggers_form_read_through_its_edges() -> None:
+    """The rig's form behind colour codes is the rig's (not "another form"); data lines of
+    another form joined by a carriage return are each read; a time stamp that looked
+    constant over the first 5000 lines and changes later is still a prefix (a second
+    reader found: the colour codes named as another form, a joined line lost uncounted, 500
+    lines of a new minute lost as malformed)."""
+    rows = body(200)
+    coloured = "\n".join(f"\x1b[32m{r.rstrip(chr(13))}\x1b[0m" for r in rows) + "\n"
+    log = parse_rig_log_text(coloured, "mem")
+    assert log.conversions == [] and log.runs[0].account.samples_used == 200
+    other = [_dialect_line(r, "dbg", k).rstrip("\r") for k, r in enumerate(rows)]
+    joined = [*other[:50], other[50] + "\r" + other[51], *other[52:]]
+    log = parse_rig_log_text("\n".join(joined) + "\n", "mem")
+    assert log.n_data == 200 and log.runs[0].account.samples_used == 200
+    many = body(6000)
+    stamped = [f"2021-05-01 18:0{5 + (k >= 5500)} INFO " + r.strip().removeprefix("[inf] ")
+               for k, r in enumerate(many)]
+    log = parse_rig_log_text("\n".join(stamped) + "\n", "mem")
+    assert log.n_data == 6000 and "prefix '2021-05-01 18:05 INFO '" in log.conversions[0]
+
+
+def test_a_log_at_the_cameras_rate_whose_camera_later_slows_has_no_backlog() -> None:
+    """One new fix per line at the camera's rate, then the camera slower (or the ball lost
+    for 3 s and then seen on every other line): no start-up replay, however the second half
+    paces the fixes (a second reader's cases: 1502 and 1500 fixes had been dropped)."""
+    from bfr_model.io.timing import camera_backlog_end  # noqa: PLC0415 - the rule under test
+
+    line = 1 / 154
+    first = np.arange(1200) * line
+    assert camera_backlog_end(np.r_[first, first[-1] + np.cumsum(np.full(1183, 1.7 * line))],
+                              line_period=line) == 0
+    first = np.arange(1500) * line
+    assert camera_backlog_end(np.r_[first, first[-1] + 3.0 + np.arange(520) * 2 * line],
+                              line_period=line) == 0

@@ -294,13 +294,20 @@ class OrbitalController:
             drift=[1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
         self.reset()
 
-    def reset(self) -> None:
-        """Back to WAITING with a fresh estimator."""
+    def reset(self, keep_lost: bool = False) -> None:
+        """Back to WAITING with a fresh estimator.
+
+        ``keep_lost``: a latched BALL_LOST stays (with its reason and time): a node's fault
+        recovery must not re-arm what only an operator's reset may.
+        """
+        lost = (self.reason, self.lost_at) if keep_lost and self.mode == BALL_LOST else None
         self.estimator.reset()
         self.mode = WAITING
         self.reason = "no ball observation yet"
         self.lost_at: float | None = None
         self.last_torque = 0.0  # the command that acts until the next one [N m]
+        if lost is not None:
+            self.mode, (self.reason, self.lost_at) = BALL_LOST, lost
 
     def _lose(self, t: float, reason: str) -> None:
         self.mode = BALL_LOST

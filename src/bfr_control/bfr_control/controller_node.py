@@ -346,7 +346,7 @@ class ControllerNode(Node):
             self.get_logger().error(f"exception ({why}); the controller is in FAULT with zero "
                                     f"torque until a step runs cleanly again")
         try:
-            self.ctrl.reset()
+            self.ctrl.reset(keep_lost=True)  # a latched BALL_LOST outlives the FAULT
             self.pending.clear()
             self.last_step_ns = None
         finally:
@@ -383,8 +383,7 @@ class ControllerNode(Node):
                                    + (_STAYS_LOST if latched
                                       else "controller restarts in WAITING"))
             self.fault = ""
-            if not latched:
-                self.ctrl.reset()
+            self.ctrl.reset(keep_lost=True)
             self.pending.clear()
             self.last_step_ns = None
         if self.js is not None and got[0] <= self.js[0]:

@@ -437,6 +437,27 @@ def _topic_summary(by_topic: dict[str, list[Any]]) -> dict[str, dict[str, Any]]:
     return topics
 
 
+def _loop_inputs(by_topic: dict[str, list[Any]]) -> dict[str, int]:
+    """Messages of each loop node's inputs recorded while it was publishing.
+
+    ``joint_states`` and ``ball_observation`` within the span of ``controller_state``,
+    camera_info within that of ``ball_observation`` (by log time): the recorder runs before
+    and after the nodes, so the whole bag's counts would hold samples no node could answer.
+    """
+    def span(topic: str) -> tuple[int, int] | None:
+        t = [m.log_time for m in by_topic.get(topic, [])]
+        return (min(t), max(t)) if t else None
+
+    def within(msgs: list[Any], sp: tuple[int, int] | None) -> int:
+        return 0 if sp is None else sum(sp[0] <= m.log_time <= sp[1] for m in msgs)
+
+    info = [m for t, msgs in by_topic.items() if t.endswith("camera_info") for m in msgs]
+    states, seen = span("controller_state"), span("ball_observation")
+    return {"joint_states": within(by_topic.get("joint_states", []), states),
+            "ball_observation": within(by_topic.get("ball_observation", []), states),
+            "camera_info": within(info, seen)}
+
+
 def _mode_summary(run: _BagRun) -> dict[str, Any]:
     """Steps per mode, the final mode, the control-loop rate and the first ROLLING step."""
     mode, ts = run.mode, run.state_t
@@ -559,6 +580,7 @@ def summarize_bag(path: str | Path) -> dict[str, Any]:
     out: dict[str, Any] = {"bag": str(path), "complete": contents.complete,
                            "topics": _topic_summary(by_topic), "warnings": contents.warnings,
                            "duration": run.t1 - run.t0}
+    out["loop_inputs"] = _loop_inputs(by_topic)
     out.update(_mode_summary(run))
     out.update(_rolling_summary(run, out["rolling_from"]))
     torque = np.array([s.torque for s in run.states]) if run.states else np.zeros(0)
@@ -819,28 +841,35 @@ def run_warnings(s: dict[str, Any]) -> list[str]:
     measured under :data:`KEPT_UP` of the camera's frames, a controller that stepped on
     under that share of its trigger's samples (encoder samples on hardware, observations
     in a simulation), no encoder sample at all. Each a line; none for a run that kept up.
+    The inputs are counted while the node that answers them published
+    (``s["loop_inputs"]``, :func:`summarize_bag`), else over the bag. A driver that
+    publishes each joint in a message of its own, or a controller triggered otherwise
+    (``-p controller:loop.trigger:=...``), would read as a controller that fell behind.
     """
     topics, published = s["topics"], s.get("published", {})
-    out = [f"{topic}: {pub - topics[topic]['count']} of {pub} published message(s) not "
-           f"recorded (the bag's figures undercount the run)"
+    out = [f"{topic}: {pub - topics.get(topic, {}).get('count', 0)} of {pub} published "
+           f"message(s) not recorded (the bag's figures undercount the run)"
            for topic, pub in sorted(published.items())
-           if topic in topics and topics[topic]["count"] < pub]
+           if topics.get(topic, {}).get("count", 0) < pub]
 
     def count(topic: str) -> int:
         return int(topics.get(topic, {}).get("count", 0))
 
+    # the inputs recorded while the loop nodes ran (the recorder runs before and after them)
+    inputs = s.get("loop_inputs") or {
+        "joint_states": count("/joint_states"), "ball_observation": count("/ball_observation"),
+        "camera_info": max((d["count"] for t, d in topics.items() if t.endswith("camera_info")),
+                           default=0)}
     if not count("/joint_states"):
         out.append("no /joint_states recorded: no encoder sample reached the recorder")
-    frames = max((d["count"] for t, d in topics.items() if t.endswith("camera_info")),
-                 default=0)
-    seen = count("/ball_observation")
+    frames, seen = inputs["camera_info"], count("/ball_observation")
     if frames and seen < KEPT_UP * frames:
         out.append(f"the camera node measured {seen} of {frames} camera frames "
                    f"({100 * seen / frames:.0f} %): it fell behind the camera")
-    trigger = "/joint_states" if s.get("mode") == "hardware" else "/ball_observation"
-    samples, steps = count(trigger), count("/controller_state")
+    trigger = "joint_states" if s.get("mode") == "hardware" else "ball_observation"
+    samples, steps = inputs[trigger], count("/controller_state")
     if samples and steps < KEPT_UP * samples:
-        what = "encoder samples" if trigger == "/joint_states" else "ball observations"
+        what = "encoder samples" if trigger == "joint_states" else "ball observations"
         out.append(f"the controller stepped on {steps} of {samples} {what} "
                    f"({100 * steps / samples:.0f} %): it fell behind")
     return out

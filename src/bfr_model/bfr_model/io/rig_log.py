@@ -157,10 +157,14 @@ class LineDialect:
 
     @property
     def regex(self) -> re.Pattern[str]:
-        """A data line of this form; one group per key, in the file's order."""
-        head = "[^=]*?" if self.prefix is None else re.escape(self.prefix)
+        """A data line of this form; one group per key, in the file's order.
+
+        Any text without ``=`` before the first key, whatever the prefix of the lines the
+        form was found on (a time stamp that looked constant over the first lines changes
+        later: a minute's, a date's).
+        """
         fields = r",\s*".join(f"{re.escape(k)}=([^,]*)" for k in self.keys)
-        return re.compile(rf"{head}{fields}\s*")
+        return re.compile(rf"[^=]*?{fields}\s*")
 
     @property
     def order(self) -> tuple[int, ...]:
@@ -197,7 +201,13 @@ class LineDialect:
             if _DATA_RE.fullmatch(line):
                 standard += 1
                 continue
-            m = _FIELDS_RE.fullmatch(_clean_terminal_line(line))
+            if line.count("=") < len(KEYS) or len(line) > 4096:  # not one data line
+                continue
+            clean = _clean_terminal_line(line)
+            if _DATA_RE.fullmatch(clean):  # the rig's form behind escape codes
+                standard += 1
+                continue
+            m = _FIELDS_RE.fullmatch(clean)
             if m is None:
                 continue
             keys = tuple(f.split("=", 1)[0].strip() for f in m["body"].split(","))
@@ -707,6 +717,12 @@ def _scan_dialect_line(scan: _LogScan, dialect: LineDialect, line: str, lineno: 
     """
     regex = _dialect_regex(dialect)
     m = regex.fullmatch(line)
+    if m is None and "\r" in line:  # data lines joined by carriage returns: each is read
+        pieces = [piece for piece in line.split("\r") if piece.strip()]
+        if sum(dialect.looks_like_data(piece) for piece in pieces) > 1:
+            for piece in pieces:
+                _scan_dialect_line(scan, dialect, piece, lineno)
+            return
     clean = line if m is not None else _clean_terminal_line(line)
     if m is None:
         m = regex.fullmatch(clean)
@@ -741,11 +757,10 @@ def _scan_dialect_line(scan: _LogScan, dialect: LineDialect, line: str, lineno: 
 def _dialect_fields(dialect: LineDialect, clean: str) -> tuple[str, ...]:
     """The keys (file order) of a line that may be a cut or damaged data line of ``dialect``.
 
-    Empty when the line does not start as the form's data lines do (its prefix, then a key).
+    Empty when no key (``name=``) is in the line; the fields from the form's prefix on, else
+    from the first key.
     """
-    if dialect.prefix is not None:
-        if not clean.startswith(dialect.prefix):
-            return ()
+    if dialect.prefix is not None and clean.startswith(dialect.prefix):
         body = clean[len(dialect.prefix):]
     else:
         m = _FIRST_KEY_RE.search(clean)

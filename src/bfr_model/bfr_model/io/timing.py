@@ -320,7 +320,8 @@ def _burst_at_line_rate(gaps: FloatArray, steady: int, min_burst: int,
     ``line_period``, a line's jitter allowed) and their median under 2/3 of the camera's mean
     interval (the second half's); the end where the median of ``steady`` intervals reaches
     85 % of it, the window's leading intervals of one line (under 1.5 lines) counted to the
-    burst. 0 without ``line_period`` or such a start.
+    burst, and that within the first quarter of the fixes. 0 without ``line_period`` or
+    such a start.
     """
     if line_period is None or not line_period > 0.0 or gaps.size < 2 * (min_burst + steady):
         return 0
@@ -336,7 +337,9 @@ def _burst_at_line_rate(gaps: FloatArray, steady: int, min_burst: int,
     i = int(j[0])
     while i < j[0] + steady and gaps[i] < 1.5 * line_period:
         i += 1
-    return i + 1 if i < gaps.size else 0
+    # a start-up replay is the run's beginning: a "burst" over a quarter of the fixes is a
+    # log at the camera's rate whose camera later slowed (or lost the ball), not a replay
+    return i + 1 if i < gaps.size // 4 else 0
 
 
 def line_rate(t: FloatArray) -> float:
