@@ -841,16 +841,20 @@ def run_warnings(s: dict[str, Any]) -> list[str]:
     measured under :data:`KEPT_UP` of the camera's frames, a controller that stepped on
     under that share of its trigger's samples (encoder samples on hardware, observations
     in a simulation), no encoder sample at all. Each a line; none for a run that kept up.
+    A topic absent from the bag counts only among the loop's (:data:`RECORDER_MATCH_TOPICS`).
     The inputs are counted while the node that answers them published
     (``s["loop_inputs"]``, :func:`summarize_bag`), else over the bag. A driver that
     publishes each joint in a message of its own, or a controller triggered otherwise
     (``-p controller:loop.trigger:=...``), would read as a controller that fell behind.
     """
     topics, published = s["topics"], s.get("published", {})
+    # a topic missing from the bag counts only if it is one the recorder must have (the
+    # loop's): images and /clock are not recorded by default, and a user may leave out more
     out = [f"{topic}: {pub - topics.get(topic, {}).get('count', 0)} of {pub} published "
            f"message(s) not recorded (the bag's figures undercount the run)"
            for topic, pub in sorted(published.items())
-           if topics.get(topic, {}).get("count", 0) < pub]
+           if (topic in topics or topic in RECORDER_MATCH_TOPICS)
+           and topics.get(topic, {}).get("count", 0) < pub]
 
     def count(topic: str) -> int:
         return int(topics.get(topic, {}).get("count", 0))
