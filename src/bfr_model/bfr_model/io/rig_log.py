@@ -72,6 +72,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import io
 import json
 import math
@@ -155,7 +156,7 @@ class LineDialect:
     prefix: str | None
     keys: tuple[str, ...]
 
-    @property
+    @functools.cached_property
     def regex(self) -> re.Pattern[str]:
         """A data line of this form; one group per key, in the file's order.
 
@@ -166,7 +167,7 @@ class LineDialect:
         fields = r",\s*".join(f"{re.escape(k)}=([^,]*)" for k in self.keys)
         return re.compile(rf"[^=]*?{fields}\s*")
 
-    @property
+    @functools.cached_property
     def order(self) -> tuple[int, ...]:
         """Group index (0-based) of each of :data:`KEYS`."""
         return tuple(self.keys.index(k) for k in KEYS)
@@ -715,7 +716,7 @@ def _scan_dialect_line(scan: _LogScan, dialect: LineDialect, line: str, lineno: 
     the file's ``truncated`` last line when its keys are the first of a data line's);
     ``[inf]`` / ``[obs]`` lines and other text as in the NTNU rig's logs.
     """
-    regex = _dialect_regex(dialect)
+    regex = dialect.regex
     m = regex.fullmatch(line)
     if m is None and "\r" in line:  # data lines joined by carriage returns: each is read
         pieces = [piece for piece in line.split("\r") if piece.strip()]
@@ -772,15 +773,6 @@ def _dialect_fields(dialect: LineDialect, clean: str) -> tuple[str, ...]:
 
 #: Where the fields of a line begin when the prefix varies (a key, then ``=``).
 _FIRST_KEY_RE = re.compile(r"(?<![\w.])[A-Za-z_]\w*=")
-_DIALECT_REGEX: dict[LineDialect, re.Pattern[str]] = {}
-
-
-def _dialect_regex(dialect: LineDialect) -> re.Pattern[str]:
-    """:attr:`LineDialect.regex`, compiled once per form."""
-    regex = _DIALECT_REGEX.get(dialect)
-    if regex is None:
-        regex = _DIALECT_REGEX[dialect] = dialect.regex
-    return regex
 
 
 def _finish_run(raw: _RunRows, source: str, duplicates: str,
