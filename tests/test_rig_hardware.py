@@ -11,9 +11,11 @@ SIGINT and print the summary from the bag.
 from __future__ import annotations
 
 import json
+import re
 import subprocess
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -46,8 +48,17 @@ def header_stamps(bag: str, topic: str) -> np.ndarray:
     return np.array(out, dtype=np.int64)
 
 
+@dataclass(frozen=True, kw_only=True)
+class Answered:
+    """How a loop answered its inputs (:func:`answered`)."""
+
+    share: float  #: [-] of the recorded inputs answered
+    longest: float  #: [s] the longest stretch of consecutive inputs left unanswered
+    at: float  #: [s] after the run's timing began, where that stretch began
+
+
 def answered(bag: str, inputs: str, answers: str, since: float, duration: float
-             ) -> tuple[float, float]:
+             ) -> Answered:
     """How the recorded ``inputs`` were answered by ``answers`` messages of the same stamp.
 
     Over the timed run: from ``since`` [s, the stamps' clock] on, when ``bfr rig`` had seen
@@ -58,11 +69,12 @@ def answered(bag: str, inputs: str, answers: str, since: float, duration: float
 
     Returns
     -------
-    tuple of float
-        The share of the inputs answered, and the longest time [s] from an answered input to
-        a recorded input still unanswered (the longest the loop left the plant's news
-        unanswered; a pause of the inputs themselves counts only when the first input after
-        it goes unanswered).
+    Answered
+        The share of the inputs answered, and the longest stretch of consecutive inputs left
+        unanswered [s] (from the first of them to the last, plus one median input period)
+        and when it began [s after ``since``]. A loop that stops answering leaves a stretch
+        as long as it stops; inputs a best-effort reader dropped around a pause of the
+        inputs themselves (a driver's stall, then its catch-up burst) do not join across it.
     """
     x, y = np.sort(header_stamps(bag, inputs)), np.sort(header_stamps(bag, answers))
     assert x.size and y.size, (inputs, x.size, answers, y.size)
@@ -73,27 +85,57 @@ def answered(bag: str, inputs: str, answers: str, since: float, duration: float
     # > 0.95: a clean-clone CI measured 97.5 % (the recorder missing best-effort samples on
     # the loaded machine; 99.7-100 % alone); a loop that stamped its states otherwise has ~0
     assert np.isin(y, x).mean() > 0.95, f"{answers}: stamps of no {inputs}"
-    hit = np.isin(x, y)
-    # each input's time since the last answered one (0 for an answered input)
-    last = np.maximum.accumulate(np.where(hit, x, x[0]))
-    return float(hit.mean()), float((x - last).max() / 1e9)
+    return longest_unanswered(x, np.isin(x, y), since)
 
 
-def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHarness,
-                                                      node_processes, tmp_path: Path) -> None:  # noqa: ANN001
-    cam_yaml = tmp_path / "hw_camera.yaml"
-    standin = node_processes.start_python(str(STANDIN), args=[
-        "--camera-params-out", str(cam_yaml), "--frame-rate", "100"])
-    assert ros_harness.spin_until(cam_yaml.exists, timeout=60), standin.output()[-2000:]
-    log_dir = tmp_path / "rig"
-    duration = 6.0
-    t0 = time.time()
+def longest_unanswered(x: np.ndarray, hit: np.ndarray, since: float) -> Answered:
+    """The share answered and the longest stretch of consecutive unanswered inputs.
+
+    ``x``: the inputs' stamps [ns], sorted; ``hit``: which were answered; ``since`` [s]: the
+    run's start on the stamps' clock. A stretch spans its first input to its last plus one
+    median input period.
+    """
+    edges = np.diff(np.concatenate(([0], (~hit).astype(np.int8), [0])))
+    first, last = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1) - 1
+    if not first.size:
+        return Answered(share=1.0, longest=0.0, at=0.0)
+    period = float(np.median(np.diff(x))) if x.size > 1 else 0.0
+    spans = x[last] - x[first] + period
+    k = int(np.argmax(spans))
+    return Answered(share=float(hit.mean()), longest=float(spans[k] / 1e9),
+                    at=float((x[first[k]] - since * 1e9) / 1e9))
+
+
+def machine_stall(loop_log: str, longest: float) -> str | None:
+    """The loop's own word that the machine, not the loop, held it up for ``longest`` [s].
+
+    The controller logs at exit its longest pause between two observations and the CPU its
+    thread used meanwhile. A pause at least ``longest`` long in which it used under half of
+    the time was spent waiting or not scheduled (another process ran, the process was
+    stopped): that line, else None (the loop was busy itself, or had no such pause).
+    """
+    m = re.search(r"pauses between observations[^:]*: \d+ \(longest (\d+) ms, ([\d.]+) ms CPU\)",
+                  loop_log)
+    if m is None:
+        return None
+    pause, cpu = float(m.group(1)) / 1e3, float(m.group(2)) / 1e3
+    return m.group(0) if pause >= longest and cpu < 0.5 * pause else None
+
+
+def run_and_check(cam_yaml: Path, log_dir: Path, duration: float
+                  ) -> tuple[Path, dict] | str:
+    """One ``bfr rig --hardware`` run against the running stand-in, checked.
+
+    Returns the log directory and the summary; or, when the controller left the plant
+    unanswered for half its watchdog and its own log says the machine held it up meanwhile
+    (:func:`machine_stall`), why (the caller runs once more). Any other failure asserts.
+    """
     run = subprocess.run(
         [sys.executable, "-m", "bfr_tools.rig", "--hardware", "--duration", str(duration),
          "--camera-params", str(cam_yaml), "--log-dir", str(log_dir), "--json"],
         env=rosutil.ros_env(), capture_output=True, text=True, timeout=400, check=False)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]
-    assert "bfr rig: running for 6 s" in run.stdout
+    assert f"bfr rig: running for {duration:g} s" in run.stdout
     started = [line for line in run.stdout.splitlines() if line.startswith("bfr rig: started")]
     assert any("recorder" in line for line in started)
     assert any("loop" in line for line in started)
@@ -115,19 +157,48 @@ def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHar
     # the loop answered the plant over the timed run (from when bfr rig saw the controller's
     # first sample and the recorder matched every topic: a node's start-up backlog is before
     # it): every recorded state carries a recorded sample's stamp, most samples have their
-    # state, and none waited half the controller's watchdog for one (not every sample: a
-    # best-effort subscription drops some on a loaded machine, which a control loop may; a
-    # loop that stops answering may not). The camera likewise measured its images (an
-    # observation carries its image's stamp; images are best effort), none left for half
-    # the time after which the controller calls a rolling ball lost
+    # state, and no stretch of them half the controller's watchdog long went unanswered (not
+    # every sample: a best-effort subscription drops some on a loaded machine, which a
+    # control loop may; a loop that stops answering may not). The camera likewise measured
+    # its images (an observation carries its image's stamp; images are best effort), no
+    # stretch of them half the time after which the controller calls a rolling ball lost
     bag, since = summary["bag"], summary["timed_from"]
-    share, gap = answered(bag, "/joint_states", "/controller_state", since, duration)
-    print(f"controller answered {share:.1%} of the samples, longest unanswered {gap * 1e3:.1f} ms")
-    assert share > 0.8 and gap < WATCHDOG_S / 2, (share, gap)
-    share, gap = answered(bag, "/camera/camera_info", "/ball_observation", since,
-                          duration)
-    print(f"camera measured {share:.1%} of the images, longest unmeasured {gap * 1e3:.1f} ms")
-    assert share > 0.5 and gap < LOST_S / 2, (share, gap)
+    loop_log = (log_dir / "loop.log").read_text()
+    said = [line for line in loop_log.splitlines()
+            if "FAULT" in line or "no observation for" in line or "pauses between" in line]
+    got = answered(bag, "/joint_states", "/controller_state", since, duration)
+    print(f"controller answered {got.share:.1%} of the samples, longest stretch unanswered "
+          f"{got.longest * 1e3:.1f} ms from {got.at:.2f} s")
+    if got.longest >= WATCHDOG_S / 2 and (stall := machine_stall(loop_log, got.longest)):
+        return (f"{got.longest * 1e3:.0f} ms unanswered from {got.at:.2f} s; the loop: "
+                f"{stall}")
+    assert got.share > 0.8 and got.longest < WATCHDOG_S / 2, (got, said[-6:])
+    got = answered(bag, "/camera/camera_info", "/ball_observation", since, duration)
+    print(f"camera measured {got.share:.1%} of the images, longest stretch unmeasured "
+          f"{got.longest * 1e3:.1f} ms from {got.at:.2f} s")
+    assert got.share > 0.5 and got.longest < LOST_S / 2, (got, said[-6:])
+    return log_dir, summary
+
+
+def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHarness,
+                                                      node_processes, tmp_path: Path) -> None:  # noqa: ANN001
+    cam_yaml = tmp_path / "hw_camera.yaml"
+    standin = node_processes.start_python(str(STANDIN), args=[
+        "--camera-params-out", str(cam_yaml), "--frame-rate", "100"])
+    assert ros_harness.spin_until(cam_yaml.exists, timeout=60), standin.output()[-2000:]
+    duration = 6.0
+    t0 = time.time()
+    first = run_and_check(cam_yaml, tmp_path / "rig", duration)
+    if isinstance(first, str):
+        # the loop says the machine held it up (not scheduled) for as long as it left the
+        # plant unanswered: one more run; a loop busy itself, or held up twice, fails
+        print(f"first run: {first}; running once more")
+        t0 = time.time()
+        second = run_and_check(cam_yaml, tmp_path / "rig2", duration)
+        assert not isinstance(second, str), f"first run: {first}; second run: {second}"
+        first = second
+    log_dir, summary = first
+    topics = summary["topics"]
     published = summary["published"]
     assert 0 < topics["/controller_state"]["count"] <= published["/controller_state"]
     loop_log = (log_dir / "loop.log").read_text()
@@ -169,3 +240,30 @@ def test_the_wait_for_the_loop_names_what_did_not_come(tmp_path: Path, capsys) -
     _wait_loop_ready({"loop": loop}, timeout=0.3)
     out = capsys.readouterr().out
     assert "the camera node up; the controller node up; the controller matched" in out, out
+
+
+def test_a_stretch_unanswered_is_the_loops_not_the_drivers_pause() -> None:
+    """The measure of the test above: a driver's pause, then a burst whose first samples a
+    best-effort reader dropped, is no stretch; a loop that stops answering is one as long."""
+    x = np.arange(0, 6_000_000_000, 2_000_000, dtype=np.int64)  # 500 Hz for 6 s
+    hit = np.ones(x.size, bool)
+    assert longest_unanswered(x, hit, 0.0) == Answered(share=1.0, longest=0.0, at=0.0)
+    paused = np.delete(x, np.s_[1000:1150])  # the driver silent 0.3 s at 2 s ...
+    hit = np.ones(paused.size, bool)
+    hit[1000:1003] = False  # ... and the first three after it dropped
+    got = longest_unanswered(paused, hit, 0.0)
+    assert got.longest == pytest.approx(0.006) and got.at == pytest.approx(2.3)
+    hit = np.ones(x.size, bool)
+    hit[1500:1650] = False  # the loop stopped for 0.3 s at 3 s
+    got = longest_unanswered(x, hit, 0.5)
+    assert got.longest == pytest.approx(0.3) and got.at == pytest.approx(2.5)
+    assert got.share == pytest.approx(1 - 150 / 3000)
+
+
+def test_a_stall_is_the_machines_only_when_the_loop_says_it_waited() -> None:
+    line = ("[controller]: controller: 4211 steps ...; pauses between observations >= 30 ms of "
+            "wall time: {n} (longest {ms} ms, {cpu} ms CPU); zero torque published on exit")
+    assert machine_stall(line.format(n=4, ms=511, cpu=5.2), 0.46) is not None
+    assert machine_stall(line.format(n=4, ms=511, cpu=400.0), 0.46) is None  # busy itself
+    assert machine_stall(line.format(n=4, ms=120, cpu=5.2), 0.46) is None  # not that long
+    assert machine_stall("no exit line", 0.46) is None
