@@ -10,10 +10,12 @@ mode, the zero torque and the log.
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 import rosutil
 from bfr_model.dynamics import RigidModel
+from bfr_model.param_file import config_path
 from bfr_model.params import load_params
 from bfr_ros.node_common import COMMAND_QOS, STATE_QOS
 from bfr_tools.rig import orbit_start
@@ -366,3 +368,25 @@ def test_controller_node_unwraps_a_driver_within_a_turn(ros_harness: rosutil.Ros
     np.testing.assert_allclose(turns, np.round(turns[0]), atol=1e-9)
     out = ctl.output()
     assert out.count("the frame angle wraps at a turn") == 1, out[-3000:]
+
+
+def test_controller_node_in_a_namespace_gets_the_hardware_file_or_says_why_not(
+        ros_harness: rosutil.RosHarness, node_processes, tmp_path: Path) -> None:  # noqa: ANN001
+    """Under ``-r __ns:=/rig1`` the shipped hardware.yaml (sections ``/**/controller``) sets
+    the controller's trigger; a file with a bare ``controller:`` section, which ROS 2 skips
+    for /rig1/controller without a word, is named at start (a probe written apart found
+    the rig's 0.2 s watchdog and per-sample trigger silently not applied)."""
+    hw = config_path("bfr_control", "hardware.yaml")
+    bare = tmp_path / "mine.yaml"
+    bare.write_text("controller:\n  ros__parameters:\n    loop: {trigger: joint_states}\n")
+    good = node_processes.start("bfr_control", "controller_node",
+                                ros_args=["-r", "__ns:=/rig1", "--params-file", str(hw)])
+    skipped = node_processes.start("bfr_control", "controller_node",
+                                   ros_args=["-r", "__ns:=/rig2", "--params-file", str(bare)])
+    for proc, trigger in ((good, "joint_states"), (skipped, "observation")):
+        assert ros_harness.spin_until(lambda p=proc: "trigger " in p.output(), timeout=60.0), \
+            proc.output()[-2000:]
+        assert f"trigger {trigger}," in proc.output(), proc.output()[-2000:]
+    assert "was not applied" not in good.output()
+    assert (f"parameter file {bare}: its section 'controller' is for /controller, not this "
+            f"node (/rig2/controller), and was not applied") in skipped.output()

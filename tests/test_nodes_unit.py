@@ -24,6 +24,9 @@ from bfr_ros.node_common import (
     image_to_array,
     place_process,
     realtime_scheduling,
+    ros_params_files,
+    section_applies,
+    unapplied_sections,
     unflatten,
 )
 from bfr_sim.simulator_node import RigSimulation, Schedule
@@ -527,3 +530,32 @@ def test_a_run_that_fell_behind_or_lost_messages_is_said() -> None:
     assert run_warnings(hw) == []
     del hw["topics"]["/controller_state"]  # the loop's, published, none recorded: a loss
     assert run_warnings(hw)[0].startswith("/controller_state: 9480 of 9480 published")
+
+
+def test_a_parameter_section_that_misses_its_node_in_a_namespace_is_named(
+        tmp_path: Path) -> None:
+    """rcl applies a parameter file's node section to the node it names in full: a bare
+    ``controller:`` does not reach /rig1/controller, silently. The node now says so; the
+    shipped hardware.yaml's ``/**/controller`` reaches it in any namespace."""
+    assert section_applies("/**", "/rig1/controller")
+    assert section_applies("/**/controller", "/rig1/controller")
+    assert section_applies("/**/controller", "/controller")
+    assert section_applies("controller", "/controller")
+    assert section_applies("/controller", "/controller")
+    assert not section_applies("controller", "/rig1/controller")
+    assert section_applies("/*/controller", "/rig1/controller")
+    assert not section_applies("/*/controller", "/a/b/controller")
+    assert not section_applies("/**/controller", "/rig1/camera")
+    bare = tmp_path / "bare.yaml"
+    bare.write_text("/**:\n  ros__parameters: {use_sim_time: false}\n"
+                    "controller:\n  ros__parameters: {loop: {trigger: joint_states}}\n"
+                    "camera:\n  ros__parameters: {markers: {rate: 0.0}}\n")
+    hw = REPO / "src" / "bfr_control" / "config" / "hardware.yaml"
+    argv = ["controller_node", "--ros-args", "-r", "__ns:=/rig1", "--params-file", str(bare),
+            "--params-file", str(hw), "--", "--params-file", "not-a-ros-arg.yaml"]
+    assert ros_params_files(argv) == [str(bare), str(hw)]
+    lines = unapplied_sections(argv, "controller", "/rig1/controller")
+    assert len(lines) == 1 and "section 'controller' is for /controller" in lines[0], lines
+    assert "write '/**/controller:'" in lines[0]
+    assert unapplied_sections(argv, "controller", "/controller") == []
+    assert unapplied_sections([*argv[:5], str(hw)], "camera", "/rig1/camera") == []

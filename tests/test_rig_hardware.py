@@ -31,10 +31,10 @@ STANDIN = Path(__file__).resolve().parent / "hardware_standin.py"
 _HW = yaml.safe_load(config_path("bfr_control", "hardware.yaml").read_text())
 #: The controller's watchdog on the rig [s]: no encoder sample this long is a fault. The loop
 #: must never leave the plant unanswered for half of it.
-WATCHDOG_S = float(_HW["controller"]["ros__parameters"]["safety"]["watchdog_timeout"])
+WATCHDOG_S = float(_HW["/**/controller"]["ros__parameters"]["safety"]["watchdog_timeout"])
 #: No valid camera fix this long while rolling is a lost ball [s]: the camera must never
 #: leave its images unmeasured for half of it.
-LOST_S = float(_HW["controller"]["ros__parameters"]["supervisor"]["lost_timeout"])
+LOST_S = float(_HW["/**/controller"]["ros__parameters"]["supervisor"]["lost_timeout"])
 
 
 def header_stamps(bag: str, topic: str) -> np.ndarray:

@@ -28,6 +28,7 @@ import difflib
 import gc
 import math
 import os
+import re
 import signal
 import struct
 import sys
@@ -39,6 +40,7 @@ from typing import Any
 
 import numpy as np
 import rclpy
+import yaml
 from bfr_model.param_file import ParameterError, load_ros_parameters
 from bfr_model.turns import TurnUnwrapper
 from rcl_interfaces.msg import ParameterDescriptor
@@ -84,10 +86,13 @@ __all__ = [
     "place_process",
     "read_parameter_tree",
     "realtime_scheduling",
+    "ros_params_files",
     "run_node",
     "run_nodes",
+    "section_applies",
     "stamp_to_ns",
     "turn_unwrapper",
+    "unapplied_sections",
     "unflatten",
 ]
 
@@ -724,6 +729,59 @@ class StopFlag:
         sys.unraisablehook = hook
 
 
+def ros_params_files(argv: Iterable[str]) -> list[str]:
+    """The ``--params-file`` arguments of a command line's ``--ros-args`` blocks, in order."""
+    files, inside, it = [], False, iter(argv)
+    for a in it:
+        if a == "--ros-args":
+            inside = True
+        elif a == "--":
+            inside = False
+        elif inside and a == "--params-file":
+            files.append(next(it, ""))
+    return [f for f in files if f]
+
+
+def section_applies(key: str, fqn: str) -> bool:
+    """Whether a parameter file's node section ``key`` applies to the node ``fqn``.
+
+    rcl's rule: the key is a fully qualified node name (a leading ``/`` may be left out),
+    in which ``*`` stands for one name token and ``**`` for any number of them (``/**``:
+    every node; ``/**/controller``: a node named controller in any namespace).
+    """
+    tokens = [t for t in key.strip().split("/") if t]
+    pattern = "".join("(/[^/]+)*" if t == "**" else "/[^/]+" if t == "*" else "/" + re.escape(t)
+                      for t in tokens)
+    return re.fullmatch(pattern, fqn) is not None
+
+
+def unapplied_sections(argv: Iterable[str], name: str, fqn: str) -> list[str]:
+    """Sections of the command line's parameter files meant for this node but not applied.
+
+    A section whose last name token is the node's own ``name`` and that does not apply to
+    its fully qualified name ``fqn`` (:func:`section_applies`): most often a bare
+    ``controller:`` section while the node runs in a namespace (``-r __ns:=/rig1``), which
+    ROS 2 skips without a word. One line per such section, saying what to write instead.
+    """
+    out = []
+    for f in ros_params_files(argv):
+        try:
+            doc = yaml.safe_load(Path(f).read_text())
+        except (OSError, yaml.YAMLError):
+            continue  # rcl read it (or refused it) already
+        if not isinstance(doc, Mapping):
+            continue
+        for key in doc:
+            if not isinstance(key, str) or key.rstrip("/").split("/")[-1] != name:
+                continue
+            if not section_applies(key, fqn):
+                out.append(f"parameter file {f}: its section {key!r} is for "
+                           f"{'/' + key.lstrip('/')}, not this node ({fqn}), and was not "
+                           f"applied; write '/**/{name}:' for a node of that name in any "
+                           f"namespace")
+    return out
+
+
 def init_ros(argv: list[str] | None, stop: StopFlag | None = None) -> StopFlag:
     """``rclpy.init`` without rclpy's own signal handlers, and ours for SIGINT/SIGTERM.
 
@@ -833,6 +891,10 @@ def run_nodes(node_factories: Iterable[Callable[[], Any]], argv: list[str] | Non
         try:
             for factory in node_factories:
                 nodes.append(factory())
+            for node in nodes:
+                for line in unapplied_sections(args, node.get_name(),
+                                               node.get_fully_qualified_name()):
+                    node.get_logger().warn(line)
             if after_start is not None:
                 after_start(nodes)
         except Exception as exc:
