@@ -260,9 +260,10 @@ class ControllerNode(Node):
         self.js: tuple[int, float, float] | None = None  # newest good sample
         self.js_clock_ns = self.get_clock().now().nanoseconds  # node clock at its arrival
         self.first_js_ns: int | None = None
-        # the steady clock at the first stale sample's arrival before any good one, and the
-        # stale samples dropped as the start-up backlog (:meth:`_start_backlog`)
-        self.first_stale_ns: int | None = None
+        # the steady clock at the first sample's arrival (good or not), and the stale samples
+        # dropped as the start-up backlog (:meth:`_start_backlog`)
+        self.first_arrival_ns: int | None = None
+        self.backlog_after_good = False  # a backlog sample came after a good one (said once)
         # a driver's within-a-turn angle made accumulating
         self.turns = turn_unwrapper(self, self.js_sub.topic_name)
         self.backlog_dropped = 0
@@ -366,12 +367,20 @@ class ControllerNode(Node):
     def _on_joints(self, raw: bytes, now: int | None = None) -> None:
         if now is None:  # a callback (loop.trigger joint_states)
             now = self.get_clock().now().nanoseconds
+        if self.first_arrival_ns is None:
+            self.first_arrival_ns = time.monotonic_ns()
         got = self._parse_joints(raw, now)
         if got is None:
             return
         if isinstance(got, SampleFault):
             if got.stale and self._start_backlog():
                 self.backlog_dropped += 1
+                if self.first_js_ns is not None and not self.backlog_after_good:
+                    self.backlog_after_good = True
+                    self.get_logger().info(
+                        f"{self.js_sub.topic_name}: stale samples of the start-up backlog "
+                        f"after the first good one ({got.why}): dropped, not a FAULT, for "
+                        f"{self.max_age_ns / _NS:g} s of wall time from the first sample")
                 return
             self._enter_fault(got.why, got.t_ns, got.theta, got.theta_dot)
             return
@@ -411,16 +420,16 @@ class ControllerNode(Node):
 
         The subscription queues samples from its creation on, and the node sets up (and, in
         a composed process, the other nodes set up) before it takes the first: those come
-        oldest first, stamped up to the queue's length ago. Before any sample was good and
-        within ``safety.max_stamp_age`` of steady (wall) time from the first stale one's
-        arrival (the backlog is drained in real time, whatever a simulation's clock does) a
-        stale sample is dropped (counted, and said with the "is arriving" line); after that,
-        stale is a FAULT (a clock mismatch never ends within that time).
+        oldest first, stamped up to the queue's length ago, and while the node drains them
+        their age hovers about the time it took to set up, so a good one may come before the
+        last stale one. Within ``safety.max_stamp_age`` of steady (wall) time from the first
+        sample's arrival (the backlog is drained in real time, whatever a simulation's clock
+        does) a stale sample is dropped and counted (said with the "is arriving" line, and
+        once if after a good one), not a FAULT; after that, stale is a FAULT (a clock
+        mismatch never ends within that time). A dropped sample is not used.
         """
-        now = time.monotonic_ns()
-        if self.first_stale_ns is None:
-            self.first_stale_ns = now
-        return self.first_js_ns is None and now - self.first_stale_ns <= self.max_age_ns
+        return self.first_arrival_ns is not None and (
+            time.monotonic_ns() - self.first_arrival_ns <= self.max_age_ns)
 
     def _on_camera_matched(self, status: Any) -> None:
         """Log each change of the camera's publishers matched to ``ball_observation``.
