@@ -177,6 +177,35 @@ def test_camera_info_round_trip_and_message_objects() -> None:
     np.testing.assert_allclose(real.project(np.zeros(3)), [639.5, 479.5])
 
 
+def test_a_binning_or_cropping_camera_is_modelled_as_its_images() -> None:
+    """REP 104: binning and roi keep the full sensor's calibration in k and d; the model is
+    that of the images (image_geometry's rule). A world point lands where the full-sensor
+    model puts it, less the roi's offset, divided by the binning; the size is the roi's
+    divided by the binning. A roi outside the sensor is refused (it had been: binning > 1 was
+    refused outright, and a probe's 2x2-binned driver got no fix)."""
+    full = CameraModel(**{**DISTORTED, "width": 1280, "height": 960,
+                          "k": (1200.0, 0.5, 639.5, 0.0, 1190.0, 479.5, 0.0, 0.0, 1.0)})
+    info = full.to_camera_info()
+    pose = {"position": full.position, "orientation": full.orientation}
+    points = np.array([[0.0, 0.0, 0.0], [0.05, -0.03, 0.0], [-0.08, 0.06, 0.01]])
+    for bx, by, roi, size in ((2, 2, None, (640, 480)), (0, 0, (100, 60, 800, 600), (800, 600)),
+                              (2, 1, (200, 100, 640, 480), (320, 480))):
+        msg = {**info, "binning_x": bx, "binning_y": by}
+        if roi is not None:
+            msg["roi"] = SimpleNamespace(x_offset=roi[0], y_offset=roi[1], width=roi[2],
+                                         height=roi[3], do_rectify=False)
+        cam = CameraModel.from_camera_info(msg, **pose)
+        x0, y0 = (roi[0], roi[1]) if roi is not None else (0, 0)
+        expect = (full.project(points) - [x0, y0]) / [max(bx, 1), max(by, 1)]
+        np.testing.assert_allclose(cam.project(points), expect, atol=1e-9)
+        assert (cam.width, cam.height) == size
+        np.testing.assert_allclose(cam.pixel_to_plane(cam.project(points), z=0.0)[0],
+                                   points[0], atol=1e-9)
+    outside = {**info, "roi": SimpleNamespace(x_offset=700, y_offset=0, width=640, height=480)}
+    with pytest.raises(CameraModelError, match=r"roi .* not within the calibrated 1280x960"):
+        CameraModel.from_camera_info(outside, **pose)
+
+
 def test_ros_calibration_file_drops_in(tmp_path) -> None:  # noqa: ANN001
     f = tmp_path / "ost.yaml"
     f.write_text(

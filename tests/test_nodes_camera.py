@@ -241,3 +241,59 @@ def test_camera_clock_behind_or_ahead_is_warned(ros_harness: rosutil.RosHarness,
     # the 40 stamped 0.5 s behind (30 at least received), and of the 25 others at most a few
     # a busy machine delivered over 100 ms late (one, once: 41 of 65)
     assert 30 <= n_old <= 45, summary
+
+
+def test_camera_node_says_a_rejected_camera_info_and_takes_a_binned_one(
+        ros_harness: rosutil.RosHarness, node_processes) -> None:  # noqa: ANN001
+    """An uncalibrated driver's camera_info (k all zero) is refused and the node says so for
+    every frame it cannot measure (it had said "waiting for camera_info" although the driver
+    sent one 190 times a second); then a 2x2-binning driver's camera_info (the full 1280x960
+    sensor's k, REP 104), which was refused outright, measures the 640x480 images."""
+    h = ros_harness
+    rig = CameraRig(h)
+    cam = node_processes.start("bfr_camera", "camera_node")
+    h.wait_for_match(rig.img_pub, timeout=60)
+    h.wait_for_match(rig.info_pub, timeout=30)
+    h.wait_for_match(rig.sub, timeout=30)
+    img, centre = rig.render(0.0, 0.3)
+
+    def info(**fields: object) -> CameraInfo:
+        m = CameraInfo()
+        for k, v in {**rig.cam.to_camera_info(), **fields}.items():
+            if k != "frame_id":
+                setattr(m, k, v)
+        return m
+
+    zero = info(k=[0.0] * 9)
+    for k in range(60):  # best effort until matched: until the node has said it
+        rig.info_pub.publish(zero)
+        rig.joint_state(k * 1000, 0.0, 0.0)
+        rig.image(k * 1000, img)
+        if h.spin_until(lambda: "camera_info rejected, no calibration yet" in cam.output(),
+                        timeout=0.5):
+            break
+    t = 1 * NS
+    rig.info_pub.publish(zero)
+    rig.joint_state(t, 0.0, 0.0)
+    h.spin_for(0.05)
+    rig.image(t, img)
+    o = rig.wait_obs(t, cam)
+    assert (o.status, o.valid) == (BallObservation.INVALID_INPUT, False)
+    assert "camera_info on /camera/camera_info rejected (" in cam.output(), cam.output()[-2000:]
+    kk = list(rig.cam.to_camera_info()["k"])
+    full = [2 * kk[0], 2 * kk[1], 2 * kk[2], 0.0, 2 * kk[4], 2 * kk[5], 0.0, 0.0, 1.0]
+    binned = info(width=1280, height=960, k=full, binning_x=2, binning_y=2)
+    for _ in range(60):
+        rig.info_pub.publish(binned)
+        if h.spin_until(lambda: "calibration: camera_info from" in cam.output(), timeout=0.5):
+            break
+    assert "calibration: camera_info from /camera/camera_info (640x480" in cam.output()
+    t = 2 * NS
+    rig.joint_state(t, 0.0, 0.0)
+    h.spin_for(0.05)
+    rig.image(t, img)
+    o = rig.wait_obs(t, cam)
+    assert o.status == BallObservation.FOUND and o.valid, o
+    assert math.hypot(o.x - centre[0], o.y - centre[1]) < 5e-4
+    assert cam.stop() == 0
+    assert "before a usable camera_info, the last one rejected" not in cam.log_path.read_text()

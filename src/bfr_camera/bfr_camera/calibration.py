@@ -540,8 +540,13 @@ class CameraModel:
         ----------
         info : Mapping or object
             Has ``width``, ``height``, ``k``, ``d``, ``distortion_model`` (keys or attributes;
-            upper-case ``K``/``D`` of ROS 1 are accepted too). ``binning_x/y`` > 1 are not
-            supported (use the full-resolution calibration).
+            upper-case ``K``/``D`` of ROS 1 are accepted too), and may have ``binning_x/y``
+            and ``roi``. A camera that bins or crops (REP 104) keeps the calibration of the
+            full sensor in ``k`` and ``d`` and sends images of the region ``roi`` (all zero:
+            the full sensor), ``binning`` times smaller (0 and 1: none). The model is that of
+            the images, as ``image_geometry`` builds it: ``fx' = fx / b_x``, ``cx' = (cx -
+            x_offset) / b_x`` (the skew divided likewise), size ``roi.width // b_x``; the
+            distortion, in normalised coordinates, is unchanged.
         **pose_and_timing
             ``position``, ``orientation``, ``exposure_time``, ``frame_rate``, ``frame_id``: what
             CameraInfo does not carry (defaults: those of :class:`CameraModel`).
@@ -554,17 +559,37 @@ class CameraModel:
                     return getattr(info, key)
             return default
 
-        for b in ("binning_x", "binning_y"):
-            if int(get(b, 0) or 0) > 1:
-                raise CameraModelError(f"CameraInfo {b} > 1 is not supported")
+        def field(obj: Any, name: str) -> int:
+            v = obj.get(name, 0) if isinstance(obj, Mapping) else getattr(obj, name, 0)
+            return int(v or 0)
+
+        bx, by = (max(1, int(get(b, 0) or 0)) for b in ("binning_x", "binning_y"))
+        width, height = int(get("width") or 0), int(get("height") or 0)
+        roi = get("roi")
+        x0, y0, rw, rh = ((field(roi, "x_offset"), field(roi, "y_offset"),
+                           field(roi, "width"), field(roi, "height"))
+                          if roi is not None else (0, 0, 0, 0))
+        if rw == 0 and rh == 0 and x0 == 0 and y0 == 0:
+            rw, rh = width, height
+        if rw <= 0 or rh <= 0 or x0 < 0 or y0 < 0 or (
+                width and height and (x0 + rw > width or y0 + rh > height)):
+            raise CameraModelError(f"CameraInfo roi (x {x0}, y {y0}, {rw}x{rh}) is not within "
+                                   f"the calibrated {width}x{height} sensor")
+        k = [float(v) for v in get("k", ())]
+        if len(k) == 9 and (bx, by, x0, y0) != (1, 1, 0, 0):
+            k[0], k[1], k[2] = k[0] / bx, k[1] / bx, (k[2] - x0) / bx
+            k[4], k[5] = k[4] / by, (k[5] - y0) / by
+            width, height = rw // bx, rh // by
+        elif len(k) == 9:
+            width, height = rw, rh
         d = get("d", ())
         model = get("distortion_model", "") or "plumb_bob"
         if not len(d) and model == "plumb_bob":
             d = (0.0, 0.0, 0.0, 0.0, 0.0)
         kwargs: dict[str, Any] = {
-            "width": get("width"),
-            "height": get("height"),
-            "k": tuple(get("k", ())),
+            "width": width,
+            "height": height,
+            "k": tuple(k),
             "d": tuple(d),
             "distortion_model": model,
         }

@@ -270,6 +270,7 @@ class CameraNode(Node):
         self.last_reason = ""
         self.last_theta_problem = ""
         self.info_key: tuple | None = None
+        self.info_rejected = ""  # why the newest camera_info was refused (empty: it was not)
         self.stats = {"frames": 0, "found": 0, "not_found": 0, "ambiguous": 0, "invalid": 0,
                       "missing": 0, "uncalibrated": 0, "published": 0, "time": 0.0}
         self.executor_ref: Any = None
@@ -332,7 +333,9 @@ class CameraNode(Node):
     def _on_info(self, msg: CameraInfo) -> None:
         if not self.use_camera_info:
             return
-        key = (msg.width, msg.height, tuple(msg.k), tuple(msg.d), msg.distortion_model)
+        roi = msg.roi
+        key = (msg.width, msg.height, tuple(msg.k), tuple(msg.d), msg.distortion_model,
+               msg.binning_x, msg.binning_y, roi.x_offset, roi.y_offset, roi.width, roi.height)
         if key == self.info_key:
             return
         self.info_key = key
@@ -343,9 +346,12 @@ class CameraNode(Node):
                                                            else v) for k, v in pose.items()})
             det = self._make_detector(cam)
         except (CameraModelError, ValueError) as exc:
-            self.get_logger().error(f"camera_info rejected, keeping the previous calibration: "
-                                    f"{exc}")
+            self.info_rejected = str(exc)
+            kept = ("keeping the previous calibration" if self.calibrated
+                    else "no calibration yet: images are not measured")
+            self.get_logger().error(f"camera_info rejected, {kept}: {exc}")
             return
+        self.info_rejected = ""
         first = not self.calibrated
         self.camera, self.detector = cam, det
         self.calibrated = True
@@ -373,8 +379,11 @@ class CameraNode(Node):
         self.take_info()
         if not self.calibrated:
             self.stats["uncalibrated"] += 1
-            self._invalid(out, f"waiting for camera_info on {self.info_sub.topic_name}: "
-                               f"no calibration yet, frame not measured", t0)
+            self._invalid(out, (f"camera_info on {self.info_sub.topic_name} rejected "
+                                f"({self.info_rejected}): no calibration, frame not measured"
+                                if self.info_rejected else
+                                f"waiting for camera_info on {self.info_sub.topic_name}: "
+                                f"no calibration yet, frame not measured"), t0)
             return
         arr, err = image_to_array(msg)
         if arr is None:
@@ -533,7 +542,9 @@ class CameraNode(Node):
         self.get_logger().info(
             f"camera: {s['frames']} frames, {s['found']} found, {s['not_found']} not found, "
             f"{s['ambiguous']} ambiguous, {s['invalid']} invalid ({s['missing']} for missing "
-            f"images, {s['uncalibrated']} before camera_info); mean processing "
+            f"images, {s['uncalibrated']} before a usable camera_info"
+            + (f", the last one rejected: {self.info_rejected}" if self.info_rejected else "")
+            + "); mean processing "
             f"{1e3 * s['time'] / n:.2f} ms; {self._describe_ages()}")
         self.get_logger().info(format_published({self.obs_pub.topic_name: s["published"]}))
         self.js_sub.destroy()
