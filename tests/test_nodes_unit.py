@@ -559,3 +559,19 @@ def test_a_parameter_section_that_misses_its_node_in_a_namespace_is_named(
     assert "write '/**/controller:'" in lines[0]
     assert unapplied_sections(argv, "controller", "/controller") == []
     assert unapplied_sections([*argv[:5], str(hw)], "camera", "/rig1/camera") == []
+
+
+def test_the_camera_says_how_many_of_the_drivers_images_reached_it() -> None:
+    """From the received stamps: 200 Hz for 5 s, all of the first half, a third of the
+    second (a busy node keeping the newest): about 999 sent, 667 received (67 %)."""
+    from collections import deque  # noqa: PLC0415
+
+    from bfr_camera.camera_node import CameraNode  # noqa: PLC0415
+
+    period = 5_000_000
+    stamps = [k * period for k in range(500)] + [k * period for k in range(500, 1001, 3)]
+    got = CameraNode._describe_received(SimpleNamespace(stamps=deque(stamps)))
+    assert got == ("images received 667 of about 999 the driver sent over the last 5.0 s "
+                   "(67 %, its period 5.00 ms from the stamps)"), got
+    few = CameraNode._describe_received(SimpleNamespace(stamps=deque(stamps[:5])))
+    assert few == "images received: too few to judge"
