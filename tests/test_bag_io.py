@@ -16,6 +16,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 from bfr_model.io.bag import (
+    DEFAULT_TOPICS,
     BagError,
     BagWarning,
     BagWriter,
@@ -119,13 +120,38 @@ def test_remapped_topics_and_slashes(tmp_path: Path) -> None:
     rec = sim_like(50)
     write_recording_bag(tmp_path / "bag", rec, topics={"joint_states": "rig/joint_states",
                                                       "sim_truth": "gt"}, leading_slash=False)
-    with pytest.raises(BagError, match=r"no messages on 'joint_states'.*'rig/joint_states'"):
-        read_bag(tmp_path / "bag")
+    with pytest.raises(BagError, match=r"no messages on 'other/joint_states'.*'rig/joint_states'"):
+        read_bag(tmp_path / "bag", topic_map={"joint_states": "other/joint_states"})
     back = read_bag(tmp_path / "bag", topic_map={"joint_states": "/rig/joint_states",
                                                  "truth": "/gt"})
     assert _differences(rec, back, atol=1e-9) == []
     with pytest.raises(BagError, match="unknown topic role"):
         read_bag(tmp_path / "bag", topic_map={"camera": "x"})
+
+
+def test_a_rig_recorded_in_a_namespace_is_read_there(tmp_path: Path) -> None:
+    """The nodes run with ``-r __ns:=/rig1`` record /rig1/joint_states and so on: read there
+    without a --topic per role, and said; two namespaces are a choice the reader refuses to
+    make (it had refused the bag: "no messages on 'joint_states'")."""
+    rec = sim_like(50)
+    spaced = {role: f"/rig1/{name}" for role, name in DEFAULT_TOPICS.items()}
+    write_recording_bag(tmp_path / "bag", rec, topics=spaced)
+    back = read_bag(tmp_path / "bag")
+    assert _differences(rec, back, rtol=0, atol=1e-9) == []
+    note = next(n for n in back.meta["notes"] if "namespace" in n)
+    assert note.startswith("topics: the bag records the rig in the namespace /rig1: read "
+                           "/rig1/joint_states, /rig1/effort_controller/commands"), note
+    assert back.meta["bag_topics"]["joint_states"] == "rig1/joint_states"
+    write_recording_bag(tmp_path / "two", rec, topics={"joint_states": "/a/joint_states"})
+    write_recording_bag(tmp_path / "two2", rec, topics={"joint_states": "/b/joint_states"})
+    both = read_bag_messages(tmp_path / "two")
+    two = tmp_path / "merged"
+    with BagWriter(two) as w:
+        for m in [*both.messages, *read_bag_messages(tmp_path / "two2").messages]:
+            if m.topic.endswith("joint_states"):
+                w.write(m.topic, m.msgtype, bytes(m.data), m.log_time)
+    with pytest.raises(BagError, match=r"2 namespaces hold one: /a, /b; choose one with --topic"):
+        read_bag(two)
 
 
 def test_bag_is_standard_rosbag2_mcap(tmp_path: Path) -> None:

@@ -1097,6 +1097,35 @@ def _bag_typestore(contents: BagContents, msg_dirs: list[str | Path] | None) -> 
     return store
 
 
+def _in_namespace(contents: BagContents, names: dict[str, str]
+                  ) -> tuple[dict[str, str], str | None]:
+    """The roles' topics moved into the bag's namespace when the bag has them only there.
+
+    A rig run in a namespace (``-r __ns:=/rig1``) records ``/rig1/joint_states`` and so on.
+    When no message is on the ``joint_states`` topic as named and exactly one namespace holds
+    a ``JointState`` topic of that name, every role still at its default name is read in that
+    namespace (a note says so); several such namespaces raise :class:`BagError` naming them
+    (choose with ``--topic``). Roles given another name are left as given.
+    """
+    js = names["joint_states"]
+    seen = {m.topic.lstrip("/"): m.msgtype for m in contents.messages}
+    if js in seen:
+        return names, None
+    spaces = sorted(t[:-len(js) - 1] for t, ty in seen.items()
+                    if t.endswith("/" + js) and ty == _TYPES["joint_states"])
+    if not spaces:
+        return names, None
+    if len(spaces) > 1:
+        raise BagError(f"{contents.path}: no {js!r}, but {len(spaces)} namespaces hold one: "
+                       f"{', '.join('/' + n for n in spaces)}; choose one with --topic "
+                       f"joint_states=/{spaces[0]}/{js} (and the other roles likewise)")
+    ns = spaces[0]
+    moved = {r: (f"{ns}/{t}" if t == DEFAULT_TOPICS[r] else t) for r, t in names.items()}
+    used = [f"/{t}" for r, t in moved.items() if t != names[r] and t in seen]
+    return moved, (f"topics: the bag records the rig in the namespace /{ns}: read "
+                   f"{', '.join(used)}")
+
+
 def _messages_by_role(contents: BagContents,
                       names: dict[str, str]) -> dict[str, list[RawMessage]]:
     """The bag's messages per role (``names``: topic per role, without leading ``/``).
@@ -1523,9 +1552,10 @@ def read_bag(path: str | Path, topic_map: dict[str, str] | None = None, *,
     gates = gates if gates is not None else Gates.from_params()
     contents = read_bag_messages(p)
     _warn_or_raise(contents.warnings, strict)
+    names, in_ns = _in_namespace(contents, names)
     by_role = _messages_by_role(contents, names)
     decode = _Decoder(store=_bag_typestore(contents, msg_dirs), path=contents.path)
-    notes: list[str] = []
+    notes: list[str] = [in_ns] if in_ns else []
     js = _read_joint_states(by_role["joint_states"], decode, notes, gates)
     torque = _torque(js, by_role["command"], decode, notes)
     ball = _ball_fields(js, by_role["ball"], decode, notes)
