@@ -142,6 +142,14 @@ def test_a_rig_recorded_in_a_namespace_is_read_there(tmp_path: Path) -> None:
     assert note.startswith("topics: the bag records the rig in the namespace /rig1: read "
                            "/rig1/joint_states, /rig1/effort_controller/commands"), note
     assert back.meta["bag_topics"]["joint_states"] == "rig1/joint_states"
+    # a driver in the namespace, the nodes at the root: each read where it is
+    write_recording_bag(tmp_path / "mixed", rec, topics={"joint_states": "/rig1/joint_states"})
+    mixed = read_bag(tmp_path / "mixed")
+    assert _differences(rec, mixed, rtol=0, atol=1e-9) == []
+    note = next(n for n in mixed.meta["notes"] if "namespace" in n)
+    assert note == ("topics: the bag records the rig in the namespace /rig1: read "
+                    "/rig1/joint_states; at the root: /effort_controller/commands, "
+                    "/ball_observation, /sim_truth"), note
     write_recording_bag(tmp_path / "two", rec, topics={"joint_states": "/a/joint_states"})
     write_recording_bag(tmp_path / "two2", rec, topics={"joint_states": "/b/joint_states"})
     both = read_bag_messages(tmp_path / "two")

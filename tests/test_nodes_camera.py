@@ -296,5 +296,16 @@ def test_camera_node_says_a_rejected_camera_info_and_takes_a_binned_one(
     o = rig.wait_obs(t, cam)
     assert o.status == BallObservation.FOUND and o.valid, o
     assert math.hypot(o.x - centre[0], o.y - centre[1]) < 5e-4
+    # the driver loses its calibration again: refused, the binned one kept and used
+    t = 3 * NS
+    rig.info_pub.publish(zero)
+    rig.joint_state(t, 0.0, 0.0)
+    h.spin_for(0.05)
+    rig.image(t, img)
+    assert rig.wait_obs(t, cam).valid
+    assert "camera_info rejected, keeping the previous calibration" in cam.output()
     assert cam.stop() == 0
-    assert "before a usable camera_info, the last one rejected" not in cam.log_path.read_text()
+    summary = next(line for line in cam.log_path.read_text().splitlines()
+                   if "before a usable camera_info" in line)
+    assert "; the last camera_info was rejected (" in summary, summary
+    assert "): the previous calibration kept)" in summary, summary

@@ -226,7 +226,7 @@ def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
     rig = Rig(h, [0.0, 0.0, 0.0, 2.0], t0_ns=10 * NS)
     ctl = node_processes.start("bfr_control", "controller_node", ros_args=[
         "-p", "use_sim_time:=true", "-p", "safety.watchdog_timeout:=0.5",
-        "-p", "loop.trigger:=joint_states"])
+        "-p", "safety.max_stamp_age:=2.0", "-p", "loop.trigger:=joint_states"])
     rig.wait_for_node(ctl)
     # the start-up backlog: samples the subscription queued while the node set up arrive
     # stamped up to the queue's length ago; before any good one they are dropped, not a FAULT
@@ -235,7 +235,7 @@ def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
         rig.clock(rig.t_ns)
         h.spin_for(0.05)
     for k in range(3):
-        rig.joint_state(rig.t_ns - NS + k * MS, theta=0.1)
+        rig.joint_state(rig.t_ns - 3 * NS + k * MS, theta=0.1)
     # a good sample, then one stamped 2 s behind the clock
     for _ in range(20):
         rig.t_ns += MS
@@ -250,21 +250,21 @@ def test_controller_node_stale_and_dead_encoder(ros_harness: rosutil.RosHarness,
             "dropped: stamped over safety.max_stamp_age ago)") in ctl.output(), ctl.output()
     # a backlog sample behind a good one (the node drains its queue while the samples' age
     # hovers about max_stamp_age: a probe saw FAULTs flap at 2 of 15 starts) is still the
-    # backlog, within max_stamp_age (0.5 s) of wall time from the first sample's arrival
-    rig.joint_state(rig.t_ns - NS + 3 * MS, theta=0.1)
+    # backlog, within max_stamp_age (2 s) of wall time from the first sample's arrival
+    rig.joint_state(rig.t_ns - 3 * NS + 3 * MS, theta=0.1)
     assert h.spin_until(lambda: "stale samples of the start-up backlog after the first good "
                         "one" in ctl.output(), timeout=5.0), ctl.output()[-2000:]
     assert not any(st.mode == FAULT for st in rig.states), ctl.output()[-2000:]
-    h.spin_for(0.6)  # past the window: stale is a FAULT
+    h.spin_for(2.1)  # past the window: stale is a FAULT
     rig.t_ns += MS
     rig.clock(rig.t_ns)
-    rig.joint_state(rig.t_ns - 2 * NS, theta=0.25)
+    rig.joint_state(rig.t_ns - 5 * NS, theta=0.25)
     assert h.spin_until(lambda: rig.states[-1].mode == FAULT, timeout=10.0), ctl.output()[-2000:]
     assert rig.cmds[-1] == 0.0
     # stamped with the stale sample's own stamp, with its values
-    assert rosutil.stamp_ns(rig.states[-1]) == rig.t_ns - 2 * NS
+    assert rosutil.stamp_ns(rig.states[-1]) == rig.t_ns - 5 * NS
     assert rig.states[-1].theta == 0.25
-    assert "joint_states stamped +2.000 s from the node's clock" in ctl.output()
+    assert "joint_states stamped +5.000 s from the node's clock" in ctl.output()
     # good samples: back to WAITING (joint_states trigger: a step per sample)
     for _ in range(5):
         rig.t_ns += MS

@@ -558,6 +558,18 @@ def test_a_parameter_section_that_misses_its_node_in_a_namespace_is_named(
     assert len(lines) == 1 and "section 'controller' is for /controller" in lines[0], lines
     assert "write '/**/controller:'" in lines[0]
     assert unapplied_sections(argv, "controller", "/controller") == []
+    # another rig's sections in a shared file, a nested form, another node's: not reported
+    shared = tmp_path / "shared.yaml"
+    shared.write_text("/rig1/controller:\n  ros__parameters: {a: 1}\n"
+                      "/rig2/controller:\n  ros__parameters: {a: 2}\n"
+                      "/camera/camera:\n  ros__parameters: {b: 1}\n"
+                      "/rig3:\n  controller:\n    ros__parameters: {a: 3}\n"
+                      "/:\n  controller:\n    ros__parameters: {a: 4}\n")
+    args = ["x", "--ros-args", "--params-file", str(shared)]
+    assert unapplied_sections(args, "controller", "/rig1/controller") != []  # the "/:" one
+    assert all("'controller' is for /controller" in x
+               for x in unapplied_sections(args, "controller", "/rig1/controller"))
+    assert unapplied_sections(args, "camera", "/camera/camera") == []
     assert unapplied_sections([*argv[:5], str(hw)], "camera", "/rig1/camera") == []
 
 
@@ -573,5 +585,11 @@ def test_the_camera_says_how_many_of_the_drivers_images_reached_it() -> None:
     got = CameraNode._describe_received(SimpleNamespace(stamps=deque(stamps)))
     assert got == ("images received 667 of about 999 the driver sent over the last 5.0 s "
                    "(67 %, its period 5.00 ms from the stamps)"), got
+    # host-stamped: +-0.5 ms of jitter on every stamp, every image received
+    rng = np.random.default_rng(3)
+    jittered = np.arange(1000) * period + rng.integers(-500_000, 500_001, 1000)
+    got = CameraNode._describe_received(SimpleNamespace(stamps=deque(jittered.tolist())))
+    share = float(got.split("(")[1].split(" %")[0])
+    assert 99 <= share <= 101, got
     few = CameraNode._describe_received(SimpleNamespace(stamps=deque(stamps[:5])))
     assert few == "images received: too few to judge"

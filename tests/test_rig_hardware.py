@@ -106,29 +106,42 @@ def longest_unanswered(x: np.ndarray, hit: np.ndarray, since: float) -> Answered
                     at=float((x[first[k]] - since * 1e9) / 1e9))
 
 
-def machine_stall(loop_log: str, longest: float) -> str | None:
-    """The loop's own word that the machine, not the loop, held it up for ``longest`` [s].
+def machine_stall(loop_log: str, got: Answered, since: float) -> str | None:
+    """The loop's own word that the machine, not the loop, held it up where it left ``got``.
 
-    The controller logs at exit its longest pause between two observations and the CPU its
-    thread used meanwhile. A pause at least ``longest`` long in which it used under half of
-    the time was spent waiting or not scheduled (another process ran, the process was
-    stopped): that line, else None (the loop was busy itself, or had no such pause).
+    The controller logs at exit its longest wall-time gap between two joint_states samples
+    it took, the CPU its thread used meanwhile and when the gap ended (the system clock, the
+    stamps' here). A gap at least as long as the unanswered stretch, overlapping it, in which
+    the thread used under half of the time, was spent not scheduled (the process stopped or
+    its CPU taken away; the samples were queued or lost meanwhile): that line, else None (the
+    loop was busy itself, or the gap was elsewhere).
     """
-    m = re.search(r"pauses between observations[^:]*: \d+ \(longest (\d+) ms, ([\d.]+) ms CPU\)",
-                  loop_log)
+    m = re.search(r"longest gap between joint_states samples (\d+) ms \(([\d.]+) ms CPU\), "
+                  r"ended at ([\d.]+) s", loop_log)
     if m is None:
         return None
-    pause, cpu = float(m.group(1)) / 1e3, float(m.group(2)) / 1e3
-    return m.group(0) if pause >= longest and cpu < 0.5 * pause else None
+    gap, cpu, end = float(m.group(1)) / 1e3, float(m.group(2)) / 1e3, float(m.group(3))
+    first, last = since + got.at, since + got.at + got.longest
+    overlaps = end - gap <= last + 0.01 and end >= first - 0.01
+    return m.group(0) if gap >= got.longest and cpu < 0.5 * gap and overlaps else None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Stalled:
+    """A run the machine held up (:func:`machine_stall`): why, and its recorded commands."""
+
+    why: str
+    commands: int
 
 
 def run_and_check(cam_yaml: Path, log_dir: Path, duration: float
-                  ) -> tuple[Path, dict] | str:
+                  ) -> tuple[Path, dict] | Stalled:
     """One ``bfr rig --hardware`` run against the running stand-in, checked.
 
     Returns the log directory and the summary; or, when the controller left the plant
     unanswered for half its watchdog and its own log says the machine held it up meanwhile
-    (:func:`machine_stall`), why (the caller runs once more). Any other failure asserts.
+    (:func:`machine_stall`), a :class:`Stalled` (the caller runs once more). Any other
+    failure asserts.
     """
     run = subprocess.run(
         [sys.executable, "-m", "bfr_tools.rig", "--hardware", "--duration", str(duration),
@@ -169,9 +182,10 @@ def run_and_check(cam_yaml: Path, log_dir: Path, duration: float
     got = answered(bag, "/joint_states", "/controller_state", since, duration)
     print(f"controller answered {got.share:.1%} of the samples, longest stretch unanswered "
           f"{got.longest * 1e3:.1f} ms from {got.at:.2f} s")
-    if got.longest >= WATCHDOG_S / 2 and (stall := machine_stall(loop_log, got.longest)):
-        return (f"{got.longest * 1e3:.0f} ms unanswered from {got.at:.2f} s; the loop: "
-                f"{stall}")
+    if got.longest >= WATCHDOG_S / 2 and (stall := machine_stall(loop_log, got, since)):
+        return Stalled(why=f"{got.longest * 1e3:.0f} ms unanswered from {got.at:.2f} s; the "
+                           f"loop: {stall}",
+                       commands=topics["/effort_controller/commands"]["count"])
     assert got.share > 0.8 and got.longest < WATCHDOG_S / 2, (got, said[-6:])
     got = answered(bag, "/camera/camera_info", "/ball_observation", since, duration)
     print(f"camera measured {got.share:.1%} of the images, longest stretch unmeasured "
@@ -189,14 +203,16 @@ def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHar
     duration = 6.0
     t0 = time.time()
     first = run_and_check(cam_yaml, tmp_path / "rig", duration)
-    if isinstance(first, str):
-        # the loop says the machine held it up (not scheduled) for as long as it left the
-        # plant unanswered: one more run; a loop busy itself, or held up twice, fails
-        print(f"first run: {first}; running once more")
+    before = 0  # commands recorded in a run the machine held up
+    if isinstance(first, Stalled):
+        # the loop says the machine held it up (not scheduled) where and as long as it left
+        # the plant unanswered: one more run; a loop busy itself, or held up twice, fails
+        print(f"first run: {first.why}; running once more")
         t0 = time.time()
         second = run_and_check(cam_yaml, tmp_path / "rig2", duration)
-        assert not isinstance(second, str), f"first run: {first}; second run: {second}"
-        first = second
+        assert not isinstance(second, Stalled), \
+            f"first run: {first.why}; second run: {second.why}"
+        before, first = first.commands, second
     log_dir, summary = first
     topics = summary["topics"]
     published = summary["published"]
@@ -208,7 +224,8 @@ def test_bfr_rig_hardware_runs_the_loop_on_a_standin(ros_harness: rosutil.RosHar
     assert standin.stop() == 0
     out = standin.log_path.read_text()
     received = int(out.split("received ")[1].split(" commands")[0])
-    assert received >= 0.5 * topics["/effort_controller/commands"]["count"], out[-1000:]
+    assert received >= 0.5 * (before + topics["/effort_controller/commands"]["count"]), \
+        out[-1000:]
     # the summary in words, as a user sees it (from the same bag)
     from bfr_tools.rig import format_summary  # noqa: PLC0415 - the module under test
     text = format_summary(summary)
@@ -260,10 +277,14 @@ def test_a_stretch_unanswered_is_the_loops_not_the_drivers_pause() -> None:
     assert got.share == pytest.approx(1 - 150 / 3000)
 
 
-def test_a_stall_is_the_machines_only_when_the_loop_says_it_waited() -> None:
-    line = ("[controller]: controller: 4211 steps ...; pauses between observations >= 30 ms of "
-            "wall time: {n} (longest {ms} ms, {cpu} ms CPU); zero torque published on exit")
-    assert machine_stall(line.format(n=4, ms=511, cpu=5.2), 0.46) is not None
-    assert machine_stall(line.format(n=4, ms=511, cpu=400.0), 0.46) is None  # busy itself
-    assert machine_stall(line.format(n=4, ms=120, cpu=5.2), 0.46) is None  # not that long
-    assert machine_stall("no exit line", 0.46) is None
+def test_a_stall_is_the_machines_only_when_the_loop_says_it_waited_there() -> None:
+    line = ("[controller]: controller: 4211 steps ...; longest gap between joint_states "
+            "samples {ms} ms ({cpu} ms CPU), ended at {end} s (system clock); zero torque")
+    got = Answered(share=0.93, longest=0.46, at=3.0)  # unanswered from 1003.0 to 1003.46 s
+    since = 1000.0
+    assert machine_stall(line.format(ms=511, cpu=5.2, end=1003.5), got, since) is not None
+    assert machine_stall(line.format(ms=511, cpu=400.0, end=1003.5), got, since) is None
+    assert machine_stall(line.format(ms=120, cpu=5.2, end=1003.5), got, since) is None
+    # a gap as long but elsewhere (a driver's pause at 1 s) is no excuse
+    assert machine_stall(line.format(ms=511, cpu=5.2, end=1001.0), got, since) is None
+    assert machine_stall("no exit line", got, since) is None

@@ -545,8 +545,11 @@ class CameraModel:
             full sensor in ``k`` and ``d`` and sends images of the region ``roi`` (all zero:
             the full sensor), ``binning`` times smaller (0 and 1: none). The model is that of
             the images, as ``image_geometry`` builds it: ``fx' = fx / b_x``, ``cx' = (cx -
-            x_offset) / b_x`` (the skew divided likewise), size ``roi.width // b_x``; the
-            distortion, in normalised coordinates, is unchanged.
+            x_offset) / b_x``, size ``roi.width // b_x``; the distortion, in normalised
+            coordinates, is unchanged. Two choices of ours: the skew is divided by ``b_x``
+            too (``image_geometry`` leaves it, which is wrong unless it is zero), and, like
+            ``image_geometry``, a binned pixel's centre is taken at ``b`` times its index
+            (an averaging sensor's is ``(b - 1) / 2`` further: 0.25 px at 2x2).
         **pose_and_timing
             ``position``, ``orientation``, ``exposure_time``, ``frame_rate``, ``frame_id``: what
             CameraInfo does not carry (defaults: those of :class:`CameraModel`).
@@ -571,8 +574,10 @@ class CameraModel:
                           if roi is not None else (0, 0, 0, 0))
         if rw == 0 and rh == 0 and x0 == 0 and y0 == 0:
             rw, rh = width, height
-        if rw <= 0 or rh <= 0 or x0 < 0 or y0 < 0 or (
-                width and height and (x0 + rw > width or y0 + rh > height)):
+        if rw <= 0 or rh <= 0:
+            raise CameraModelError(f"CameraInfo roi is empty ({rw}x{rh} at x {x0}, y {y0}; "
+                                   f"calibrated size {width}x{height})")
+        if x0 < 0 or y0 < 0 or (width and height and (x0 + rw > width or y0 + rh > height)):
             raise CameraModelError(f"CameraInfo roi (x {x0}, y {y0}, {rw}x{rh}) is not within "
                                    f"the calibrated {width}x{height} sensor")
         k = [float(v) for v in get("k", ())]

@@ -540,9 +540,11 @@ class CameraNode(Node):
     def _describe_received(self) -> str:
         """How many of the driver's images reached the node, from the images' stamps.
 
-        The node sees only what arrives; the driver's period is estimated as the 10th
-        percentile of the gaps between consecutive received stamps (robust while at least a
-        tenth of the images arrive back to back), and the span over it is what was sent.
+        The node sees only what arrives; the driver's period is estimated from the gaps
+        between consecutive received stamps: each gap divided by the whole number of 10th
+        percentile gaps it spans (1 for images back to back, 3 for two missed between), the
+        median of those (so a stamp's jitter neither halves a gap nor counts an image), and
+        the span over it is what was sent.
         A best-effort subscription keeping the newest image takes fewer when the node is
         busy, and images too large for shared memory go in UDP fragments a loaded machine
         drops: a low share says so before the fixes' rate does.
@@ -552,7 +554,8 @@ class CameraNode(Node):
         gaps = gaps[gaps > 0]
         if gaps.size < 10:
             return "images received: too few to judge"
-        period = float(np.percentile(gaps, 10))
+        spans = np.maximum(np.rint(gaps / np.percentile(gaps, 10)), 1.0)
+        period = float(np.median(gaps / spans))
         sent = (t[-1] - t[0]) / period + 1.0
         return (f"images received {t.size} of about {sent:.0f} the driver sent over the last "
                 f"{(t[-1] - t[0]) / 1e9:.1f} s ({100.0 * t.size / sent:.0f} %, its period "
@@ -566,7 +569,9 @@ class CameraNode(Node):
             f"camera: {s['frames']} frames, {s['found']} found, {s['not_found']} not found, "
             f"{s['ambiguous']} ambiguous, {s['invalid']} invalid ({s['missing']} for missing "
             f"images, {s['uncalibrated']} before a usable camera_info"
-            + (f", the last one rejected: {self.info_rejected}" if self.info_rejected else "")
+            + (f"; the last camera_info was rejected ({self.info_rejected}): "
+               + ("the previous calibration kept" if self.calibrated else "no calibration")
+               if self.info_rejected else "")
             + "); mean processing "
             f"{1e3 * s['time'] / n:.2f} ms; {self._describe_ages()}; "
             f"{self._describe_received()}")

@@ -31,9 +31,10 @@ Safety, in the node whatever the core does:
   time under ``use_sim_time``: dead driver or simulator), non-finite or malformed samples,
   or samples stamped more than ``safety.max_stamp_age`` away from the node's clock: zero
   torque, mode FAULT, an error log; the controller starts afresh (WAITING) when good
-  samples return (but samples older than that before the first good one, within
-  ``max_stamp_age`` of steady time from the first of them, are the start-up backlog the
-  subscription queued while the node set up: dropped, counted in the "is arriving" line);
+  samples return (but samples older than that within ``max_stamp_age`` of steady time from
+  the first one that arrived with the node's clock running are the start-up backlog the
+  subscription queued while the node set up: dropped, not used, counted in the "is
+  arriving" line, or said once if one comes after a good sample);
 - an exception in any callback (a bug, or input no check foresaw) never ends the node: it
   puts the controller in FAULT with zero torque, logged once with its reason (exception
   type, message and where), and the controller restarts in WAITING at the next step that
@@ -155,7 +156,8 @@ class SampleFault(NamedTuple):
     theta: float = math.nan
     theta_dot: float = math.nan
     #: Stamped more than ``safety.max_stamp_age`` before the node's clock (not after it):
-    #: start-up backlog before the first good sample (:meth:`ControllerNode._start_backlog`).
+    #: start-up backlog within that time of the first sample's arrival
+    #: (:meth:`ControllerNode._start_backlog`).
     stale: bool = False
 
 
@@ -260,8 +262,8 @@ class ControllerNode(Node):
         self.js: tuple[int, float, float] | None = None  # newest good sample
         self.js_clock_ns = self.get_clock().now().nanoseconds  # node clock at its arrival
         self.first_js_ns: int | None = None
-        # the steady clock at the first sample's arrival (good or not), and the stale samples
-        # dropped as the start-up backlog (:meth:`_start_backlog`)
+        # the steady clock at the first sample's arrival (good or not) with the node's clock
+        # running, and the stale samples dropped as the start-up backlog (:meth:`_start_backlog`)
         self.first_arrival_ns: int | None = None
         self.backlog_after_good = False  # a backlog sample came after a good one (said once)
         # a driver's within-a-turn angle made accumulating
@@ -284,6 +286,11 @@ class ControllerNode(Node):
         self.obs_cpu = 0.0
         self.pauses = 0
         self.worst_pause = (0.0, 0.0)  # (wall [s], CPU of this thread meanwhile [s])
+        # the same between two joint_states samples taken (:meth:`_watch_encoder`), and when
+        # the longest gap ended [s, system clock]
+        self.js_wall: float | None = None
+        self.js_cpu = 0.0
+        self.worst_js_gap = (0.0, 0.0, 0.0)
         self.get_logger().info(
             f"controller: {self.js_sub.topic_name} + {self.obs_sub.topic_name} -> "
             f"{self.cmd_pub.topic_name}, trigger {self.trigger}, torque limit {self.limit:g} "
@@ -367,7 +374,8 @@ class ControllerNode(Node):
     def _on_joints(self, raw: bytes, now: int | None = None) -> None:
         if now is None:  # a callback (loop.trigger joint_states)
             now = self.get_clock().now().nanoseconds
-        if self.first_arrival_ns is None:
+        self._watch_encoder(now)
+        if self.first_arrival_ns is None and now > 0:  # ages are judged from now on
             self.first_arrival_ns = time.monotonic_ns()
         got = self._parse_joints(raw, now)
         if got is None:
@@ -456,6 +464,20 @@ class ControllerNode(Node):
         if self.trigger == "observation" and self.js is not None and self.js[0] >= t_ns \
                 and (not self.fault or self.exception_fault):
             self._step()
+
+    def _watch_encoder(self, now: int) -> None:
+        """Note the longest wall-time gap between two joint_states samples taken here.
+
+        With the CPU this thread used meanwhile and when it ended (the system clock, the
+        stamps' clock on the rig): a gap with little CPU is a driver that paused or a node that
+        was not scheduled (a stopped process, a CPU taken away); much CPU, the node busy
+        itself. Said in the exit line, where a test or an operator can put it beside the
+        samples the loop left unanswered.
+        """
+        wall, cpu = time.monotonic(), time.thread_time()
+        if self.js_wall is not None and wall - self.js_wall > self.worst_js_gap[0]:
+            self.worst_js_gap = (wall - self.js_wall, cpu - self.js_cpu, time.time())
+        self.js_wall, self.js_cpu = wall, cpu
 
     def _watch_pause(self) -> None:
         """Note a pause in the observations (wall clock) and whether this node was busy.
@@ -658,7 +680,10 @@ class ControllerNode(Node):
             f"{est.rejected['innovation']} fixes rejected, restarts {est.restarts}; {delay}; "
             f"pauses between observations >= {1e3 * _PAUSE_S:.0f} ms of wall time: "
             f"{self.pauses} (longest {1e3 * self.worst_pause[0]:.0f} ms, "
-            f"{1e3 * self.worst_pause[1]:.1f} ms CPU); zero torque published on exit")
+            f"{1e3 * self.worst_pause[1]:.1f} ms CPU); longest gap between joint_states "
+            f"samples {1e3 * self.worst_js_gap[0]:.0f} ms ({1e3 * self.worst_js_gap[1]:.1f} ms "
+            f"CPU), ended at {self.worst_js_gap[2]:.3f} s (system clock); zero torque "
+            f"published on exit")
         self.get_logger().info(format_published({self.cmd_pub.topic_name: s["commands"] + 1,
                                                  self.state_pub.topic_name: s["states"]}))
         if isinstance(self.js_sub, PolledSubscription):

@@ -34,7 +34,7 @@ import struct
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -755,14 +755,33 @@ def section_applies(key: str, fqn: str) -> bool:
     return re.fullmatch(pattern, fqn) is not None
 
 
-def unapplied_sections(argv: Iterable[str], name: str, fqn: str) -> list[str]:
-    """Sections of the command line's parameter files meant for this node but not applied.
+def _sections(doc: Mapping, prefix: str = "") -> Iterator[str]:
+    """Node names of a parameter file's sections: its keys down to ``ros__parameters``.
 
-    A section whose last name token is the node's own ``name`` and that does not apply to
-    its fully qualified name ``fqn`` (:func:`section_applies`): most often a bare
-    ``controller:`` section while the node runs in a namespace (``-r __ns:=/rig1``), which
-    ROS 2 skips without a word. One line per such section, saying what to write instead.
+    rcl reads both ``/rig1/controller: {ros__parameters: ...}`` and the nested form
+    ``/rig1: {controller: {ros__parameters: ...}}``.
     """
+    for key, body in doc.items():
+        if not isinstance(key, str) or not isinstance(body, Mapping):
+            continue
+        name = "/" + "/".join(t for t in (prefix.strip("/"), key.strip("/")) if t)
+        if "ros__parameters" in body:
+            yield name
+        else:
+            yield from _sections(body, name)
+
+
+def unapplied_sections(argv: Iterable[str], name: str, fqn: str) -> list[str]:
+    """Bare sections of the command line's parameter files for this node, not applied.
+
+    A section named by the node's own ``name`` alone (``controller:`` or ``/controller:``)
+    reaches ``/controller`` only: for a node in a namespace (``-r __ns:=/rig1``) ROS 2 skips
+    it without a word. One line per such section, saying what to write instead. A section
+    that names a namespace (``/rig2/controller:``, another rig's in a shared file) is taken
+    as meant for that namespace and not reported.
+    """
+    if fqn == "/" + name:
+        return []
     out = []
     for f in ros_params_files(argv):
         try:
@@ -771,14 +790,11 @@ def unapplied_sections(argv: Iterable[str], name: str, fqn: str) -> list[str]:
             continue  # rcl read it (or refused it) already
         if not isinstance(doc, Mapping):
             continue
-        for key in doc:
-            if not isinstance(key, str) or key.rstrip("/").split("/")[-1] != name:
-                continue
-            if not section_applies(key, fqn):
-                out.append(f"parameter file {f}: its section {key!r} is for "
-                           f"{'/' + key.lstrip('/')}, not this node ({fqn}), and was not "
-                           f"applied; write '/**/{name}:' for a node of that name in any "
-                           f"namespace")
+        for section in _sections(doc):
+            if section == "/" + name:
+                out.append(f"parameter file {f}: its section '{name}' is for /{name}, not "
+                           f"this node ({fqn}), and was not applied; write '/**/{name}:' "
+                           f"for a node of that name in any namespace")
     return out
 
 
@@ -811,8 +827,7 @@ def init_ros(argv: list[str] | None, stop: StopFlag | None = None) -> StopFlag:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        files = [argv[i + 1] for i, a in enumerate(argv or [])
-                 if a == "--params-file" and i + 1 < len(argv or [])]
+        files = ros_params_files(argv or [])
         where = f" (parameter file{'s' if len(files) > 1 else ''} {', '.join(files)})" \
             if files else ""
         raise ParameterError(f"invalid ROS arguments{where}: {first}") from None
@@ -853,7 +868,9 @@ def run_nodes(node_factories: Iterable[Callable[[], Any]], argv: list[str] | Non
     executor thread: a message between them does not cross processes, and an encoder sample
     both take is received once (docs/notes/issue-17.md, sixth session). Every ``-p``
     override of the command line reaches every node of the process (rcl's rule); a parameter
-    file's ``<node name>:`` section reaches that node only.
+    file's section for a node (``/**/<node name>:``, or the node's full name) reaches that
+    node only, and a bare ``<node name>:`` section the namespace kept from its node is named
+    at start (:func:`unapplied_sections`).
 
     Parameters
     ----------

@@ -16,12 +16,13 @@ changes (measured with ``bfr bench --only loop``: docs/notes/issue-17.md, sixth 
 Parameters
 ----------
 Each node reads its own files and overrides as it does alone (``--params-file`` sections
-``camera:`` / ``controller:`` reach one node, ``/**:`` both). A ``-p name:=value`` reaches
-both nodes (rcl's rule for a process): each accepts the other's parameter names, and a name
-neither knows stops the process at start. ``process.realtime_priority`` and
-``process.cpu`` are applied once for the whole process, after both nodes have warmed up:
-the higher of the two priorities, and the CPU both name (a CPU for one and -1 for the other
-pins; two different CPUs are refused).
+``/**/camera:`` / ``/**/controller:`` reach one node in any namespace, ``/**:`` both; a bare
+``camera:`` reaches /camera only, which a node in a namespace names at start). A
+``-p name:=value`` reaches both nodes (rcl's rule for a process): each accepts the other's
+parameter names, and a name neither knows stops the process at start.
+``process.realtime_priority`` and ``process.cpu`` are applied once for the whole process,
+after both nodes have warmed up: the higher of the two priorities, and the CPU both name (a
+CPU for one and -1 for the other pins; two different CPUs are refused).
 
 Do not rename the nodes with ``-r __node:=...`` (it would rename both to one name); give
 the process a namespace with ``-r __ns:=...`` if several loops share a graph.

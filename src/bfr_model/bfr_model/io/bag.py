@@ -1099,17 +1099,18 @@ def _bag_typestore(contents: BagContents, msg_dirs: list[str | Path] | None) -> 
 
 def _in_namespace(contents: BagContents, names: dict[str, str]
                   ) -> tuple[dict[str, str], str | None]:
-    """The roles' topics moved into the bag's namespace when the bag has them only there.
+    """The roles' topics read in the bag's namespace when it has them only there.
 
     A rig run in a namespace (``-r __ns:=/rig1``) records ``/rig1/joint_states`` and so on.
-    When no message is on the ``joint_states`` topic as named and exactly one namespace holds
-    a ``JointState`` topic of that name, every role still at its default name is read in that
-    namespace (a note says so); several such namespaces raise :class:`BagError` naming them
-    (choose with ``--topic``). Roles given another name are left as given.
+    When ``joint_states`` is at its default name, no message is on it, and exactly one
+    namespace holds a ``JointState`` topic of that name, each role still at its default name
+    is read in that namespace if the bag has it there, and where it was otherwise (a driver
+    in the namespace, the nodes at the root); a note names what was read where. Several such
+    namespaces raise :class:`BagError` naming them (choose with ``--topic``).
     """
     js = names["joint_states"]
     seen = {m.topic.lstrip("/"): m.msgtype for m in contents.messages}
-    if js in seen:
+    if js in seen or js != DEFAULT_TOPICS["joint_states"]:
         return names, None
     spaces = sorted(t[:-len(js) - 1] for t, ty in seen.items()
                     if t.endswith("/" + js) and ty == _TYPES["joint_states"])
@@ -1120,10 +1121,12 @@ def _in_namespace(contents: BagContents, names: dict[str, str]
                        f"{', '.join('/' + n for n in spaces)}; choose one with --topic "
                        f"joint_states=/{spaces[0]}/{js} (and the other roles likewise)")
     ns = spaces[0]
-    moved = {r: (f"{ns}/{t}" if t == DEFAULT_TOPICS[r] else t) for r, t in names.items()}
-    used = [f"/{t}" for r, t in moved.items() if t != names[r] and t in seen]
+    moved = {r: (f"{ns}/{t}" if t == DEFAULT_TOPICS[r] and f"{ns}/{t}" in seen else t)
+             for r, t in names.items()}
+    there = [f"/{t}" for r, t in moved.items() if t != names[r]]
+    root = [f"/{t}" for r, t in moved.items() if t == names[r] and t in seen]
     return moved, (f"topics: the bag records the rig in the namespace /{ns}: read "
-                   f"{', '.join(used)}")
+                   f"{', '.join(there)}" + (f"; at the root: {', '.join(root)}" if root else ""))
 
 
 def _messages_by_role(contents: BagContents,
