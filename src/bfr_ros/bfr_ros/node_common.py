@@ -780,8 +780,6 @@ def unapplied_sections(argv: Iterable[str], name: str, fqn: str) -> list[str]:
     that names a namespace (``/rig2/controller:``, another rig's in a shared file) is taken
     as meant for that namespace and not reported.
     """
-    if fqn == "/" + name:
-        return []
     out = []
     for f in ros_params_files(argv):
         try:
@@ -791,7 +789,7 @@ def unapplied_sections(argv: Iterable[str], name: str, fqn: str) -> list[str]:
         if not isinstance(doc, Mapping):
             continue
         for section in _sections(doc):
-            if section == "/" + name:
+            if section == "/" + name and not section_applies(section, fqn):
                 out.append(f"parameter file {f}: its section '{name}' is for /{name}, not "
                            f"this node ({fqn}), and was not applied; write '/**/{name}:' "
                            f"for a node of that name in any namespace")
