@@ -17,11 +17,12 @@ from bfr_diagnose.held import (
     spin_share,
     waist_period,
 )
-from bfr_diagnose.preprocess import plan_parts
+from bfr_diagnose.preprocess import HELD_WINDOW, frame_held, held_span, plan_parts
 from bfr_diagnose.synth import SynthConfig, held_frame_recording
 from bfr_model.contact import IX, IY, ContactModel
 from bfr_model.io.rig_log import read_rig_log
 from bfr_model.params import load_params
+from bfr_model.recording import Recording
 
 NOMINAL = load_params()
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "ntnu-rig"
@@ -128,6 +129,45 @@ def test_a_tilted_frame_and_small_swings(theta: float, phi0: float, tol: float) 
     assert m["rest_y"] == pytest.approx(d["rest_y"], abs=5e-5)
     assert m["path_radius"] == pytest.approx(d["path_radius"], rel=0.05)
     assert h["closed_form"]["spin_share"] == pytest.approx(spin_share(plant), rel=tol)
+
+
+def _resensed(rec: Recording, theta: np.ndarray, resolution: float | None) -> Recording:
+    """``rec`` with another sensor's frame angle (and its resolution, None: unknown)."""
+    meta = {k: v for k, v in rec.meta.items() if k != "theta_resolution"}
+    if resolution is not None:
+        meta["theta_resolution"] = resolution
+    return dataclasses.replace(rec, theta=theta, meta=meta)
+
+
+@pytest.mark.parametrize("sensor", ["flickering encoder", "analogue sensor"])
+def test_a_clamped_frame_read_by_a_restless_sensor_is_held(sensor: str) -> None:
+    """Another rig's clamped frame, as its sensor reports it: an encoder of 1 mrad steps that
+    flickers between five steps around the clamp (a span of 4 mrad, past the bound of three
+    steps), or an analogue sensor with 1 mrad of white noise (a span of about 8 mrad). Both
+    are held: their 0.1 s averages span well under 2 mrad, and the part is analysed as
+    "frame held" (it was "rolling": the frame's row fitted with zero torque). The same
+    frame creeping 20 mrad over the run, or swinging +-3 mrad at 2 Hz, is not held."""
+    rec = held_frame_recording(NOMINAL, SynthConfig(duration=6.0, camera_rate=165.0),
+                               np.random.default_rng(4), theta=0.05)
+    rng = np.random.default_rng(5)
+    n = rec.t.size
+    if sensor == "flickering encoder":
+        res = 1e-3
+        theta = res * (np.rint(rec.theta / res) + rng.integers(-2, 3, n))
+    else:
+        res = None
+        theta = rec.theta + 1e-3 * rng.standard_normal(n)
+    held = _resensed(rec, theta, res)
+    step = res if res is not None else 0.0
+    assert np.ptp(held.theta) > max(3 * step, 2e-3)   # the raw span alone: not held
+    assert held_span(held) < 1e-3 and frame_held(held, step)
+    kind, _, prep = plan_parts([held])[0][0]
+    assert kind == "frame held" and prep.frame_held
+    assert f"its {HELD_WINDOW:g} s averages" in prep.info["theta_source"]
+    creeping = _resensed(rec, theta + 0.02 * (rec.t - rec.t[0]) / np.ptp(rec.t), res)
+    assert not frame_held(creeping, step)
+    swinging = _resensed(rec, theta + 3e-3 * np.sin(2 * np.pi * 2.0 * rec.t), res)
+    assert not frame_held(swinging, step)
 
 
 def test_several_held_angles_are_refused() -> None:

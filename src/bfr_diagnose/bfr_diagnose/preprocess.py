@@ -68,9 +68,9 @@ from scipy.signal import savgol_filter
 
 from bfr_diagnose import DiagnoseError
 
-__all__ = ["Piece", "PrepConfig", "Prepared", "SensorCorrection", "fix_noise", "fix_noise_path",
-           "frame_held", "path_steps", "plan_parts", "prepare", "prepare_pieces",
-           "prepare_runs", "segments_from_mask", "split_pieces", "stitch"]
+__all__ = ["HELD_WINDOW", "Piece", "PrepConfig", "Prepared", "SensorCorrection", "fix_noise",
+           "fix_noise_path", "frame_held", "held_span", "path_steps", "plan_parts", "prepare",
+           "prepare_pieces", "prepare_runs", "segments_from_mask", "split_pieces", "stitch"]
 
 FloatArray = NDArray[np.float64]
 
@@ -598,9 +598,41 @@ def split_pieces(rec: Recording, cfg: PrepConfig | None = None
     return pieces, notes
 
 
+#: [s] The window over which a held frame's angle is averaged (:func:`frame_held`): five
+#: times the fine encoder's Savitzky-Golay window, longer than any filter the frame's rows
+#: see, so what it averages away the analysis would not have seen either.
+HELD_WINDOW = 0.1
+
+
+def held_span(rec: Recording) -> float:
+    """[rad] The span of the frame's angle averaged over :data:`HELD_WINDOW` windows.
+
+    ``m_i = mean{theta_j : |t_j - t_i| <= W / 2}`` at every sample whose whole window lies in
+    the recording (running sums on the recording's own times: any line rate, any gaps), and
+    the span ``max m - min m``; the raw angle's span when the recording is shorter than a
+    window. An encoder flickering between neighbouring steps on a clamped shaft, or an
+    analogue sensor's white noise, averages out; a frame that turns or creeps does not.
+    """
+    t, th = rec.t, rec.theta
+    half = 0.5 * HELD_WINDOW
+    full = (t - half >= t[0]) & (t + half <= t[-1])
+    if not full.any():
+        return float(np.ptp(th))
+    c = np.concatenate([[0.0], np.cumsum(th - th[0])])
+    lo = np.searchsorted(t, t[full] - half, side="left")
+    hi = np.searchsorted(t, t[full] + half, side="right")
+    return float(np.ptp((c[hi] - c[lo]) / (hi - lo)))
+
+
 def frame_held(rec: Recording, resolution: float) -> bool:
-    """Whether the frame did not turn: theta spans at most 3 encoder steps (or 2 mrad)."""
-    return bool(np.ptp(rec.theta) <= max(3.0 * resolution, 2e-3))
+    """Whether the frame did not turn: its angle spans at most 3 encoder steps (or 2 mrad).
+
+    The raw angle's span, or the span of its :data:`HELD_WINDOW` averages
+    (:func:`held_span`): a clamped frame whose encoder flickers between a few steps, or a
+    sensor whose noise spans more than the bound, is held too.
+    """
+    bound = max(3.0 * resolution, 2e-3)
+    return bool(np.ptp(rec.theta) <= bound or held_span(rec) <= bound)
 
 
 def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0,
@@ -650,7 +682,8 @@ def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0
         frame = _FrameAngle(theta=np.full(tg.size, th0), theta_dot=np.zeros(tg.size),
                             theta_ddot=np.zeros(tg.size), noise=float(res) / np.sqrt(12.0),
                             source=f"frame held at theta = {th0:.4f} rad (it spans "
-                                   f"{np.ptp(rec.theta):.2g} rad): ball rows only",
+                                   f"{np.ptp(rec.theta):.2g} rad, its {HELD_WINDOW:g} s "
+                                   f"averages {held_span(rec):.2g} rad): ball rows only",
                             lag=None)
     else:
         frame = _frame_angle(rec, tg, cfg, res)

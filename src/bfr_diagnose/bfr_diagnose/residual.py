@@ -409,6 +409,7 @@ class ResidualEvaluator:
         self._last_solution: tuple[FloatArray, FloatArray, FloatArray] | None = None
         self._ball_cache: tuple | None = None  # the ball's terms of the last evaluation
         self._frame_cache: tuple | None = None  # the frame's own terms of the last one
+        self._camera_cache: tuple | None = None  # the ball as the camera model reads it
         self._model: RigidModel | None = None   # the last evaluation's model
 
     def _conv(self, x: FloatArray, kern: FloatArray) -> FloatArray:
@@ -470,7 +471,13 @@ class ResidualEvaluator:
         if self._ball_cache is not None and self._ball_cache[0] == key:
             ball = self._ball_cache[1]
         else:
-            psi_w, psi_wd, rho = prep.ball_for(sensor, at=sel)
+            cam = (sensor.latency, sensor.offset_x, sensor.offset_y, sensor.rotation,
+                   sensor.scale)
+            if self._camera_cache is not None and self._camera_cache[0] == cam:
+                psi_w, psi_wd, rho = self._camera_cache[1]  # a physics column: the same fixes
+            else:
+                psi_w, psi_wd, rho = prep.ball_for(sensor, at=sel)
+                self._camera_cache = (cam, (psi_w, psi_wd, rho))
             psi = th + psi_w
             psid = prep.theta_dot[sel] + psi_wd
             guess = psi if self._last_solution is None else self._predicted(psi)
