@@ -48,6 +48,21 @@ sqrt(P11 + R)``). ``reinit_after`` rejected fixes in a row restart the filter fr
 newest fix (the filter, not the camera, is then the one that is wrong); a fix that arrives
 after a gap longer than ``max_gap`` is likewise used to restart it rather than fused.
 
+Stamp timing. A fix stamped ``delta`` away from its true exposure puts the frame's angle at
+the wrong time, ``psi_m = psi(t) + theta_dot delta``, and is compared with the prediction at
+the wrong time, ``phi(t) + phi_dot delta``: the innovation is off by ``delta (dphi/dpsi
+theta_dot - phi_dot)``, i.e. ``dphi/dpsi`` times the ball's *world* angular rate. A camera whose
+stamps jitter (a software stamp at arrival, a driver's queue) therefore adds
+``R_t = sigma_t^2 (dphi/dpsi theta_dot - phi_dot)^2`` to the measurement variance, where
+``sigma_t`` is the stamps' jitter. It is not assumed: it is estimated from the stamps
+themselves. Consecutive stamps differ by ``d_i = k_i T + e_i - e_(i-1)`` (``T`` the median
+interval, ``k_i`` the whole frames between them: dropped frames are whole periods), so with
+independent stamp errors ``sigma_t = 1.4826 MAD(d_i - k_i T) / sqrt 2`` over the last
+:data:`STAMP_INTERVALS` intervals (none before :data:`STAMP_MIN_INTERVALS`). A camera whose
+stamps are its exposure times gives ``sigma_t`` of rounding only and the filter is the one
+above; one whose stamps jitter by milliseconds no longer has its fixes rejected by the gate
+as the ball speeds up (``stamp_jitter``, reported by the controller node).
+
 Robustness. Every path copes with an empty, one-sample or stale encoder history: a fix
 whose exposure the history does not cover is not used; an encoder sample that follows the
 previous one by more than ``max_gap`` restarts the filter (the ball cannot be propagated
@@ -59,6 +74,7 @@ from __future__ import annotations
 
 import bisect
 import math
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -71,6 +87,11 @@ from bfr_control.orbit import PeriodicOrbit
 from bfr_control.periodic import PeriodicTable
 
 __all__ = ["BallEstimator", "BallObservation", "EstimatorConfig", "passive_phi_ddot"]
+
+#: Camera stamp intervals the stamps' jitter is estimated from (module docstring).
+STAMP_INTERVALS = 64
+#: Intervals needed before the jitter is estimated at all.
+STAMP_MIN_INTERVALS = 16
 
 
 @dataclass(frozen=True, slots=True)
@@ -222,6 +243,11 @@ class BallEstimator:
         self._t_m = -math.inf
         self.last_innovation = math.nan
         self.rejected_in_row = 0
+        # the camera's stamps (a restart of the filter keeps them: the camera is the same)
+        self._intervals: deque[float] = deque(maxlen=STAMP_INTERVALS)
+        self._last_stamp = -math.inf
+        self._stamp_sigma = 0.0
+        self._stamps_seen = 0
         if not hasattr(self, "rejected"):
             #: Fixes rejected by the gate, by reason (``radial``, ``innovation``), since start.
             self.rejected = {"radial": 0, "innovation": 0}
@@ -239,9 +265,11 @@ class BallEstimator:
             ``gate``, ``gap``, ``diverged`` or ``lost`` (counted in :attr:`restarts`).
         """
         self.restarts[why] += 1
-        ts, th, thd, last = self._ts, self._th, self._thd, self.last_rejection
+        kept = (self._ts, self._th, self._thd, self.last_rejection, self._intervals,
+                self._last_stamp, self._stamp_sigma, self._stamps_seen)
         self.reset()
-        self._ts, self._th, self._thd, self.last_rejection = ts, th, thd, last
+        (self._ts, self._th, self._thd, self.last_rejection, self._intervals,
+         self._last_stamp, self._stamp_sigma, self._stamps_seen) = kept
 
     # -- helpers ---------------------------------------------------------------------------
     def phi_of_psi(self, psi: float) -> float:
@@ -383,6 +411,7 @@ class BallEstimator:
         t_e = float(obs.t)
         if not math.isfinite(t_e) or t_e <= self.last_seen_t:
             return False  # stale or repeated frame
+        self._note_stamp(t_e)
         x, y = float(obs.x), float(obs.y)
         if not (obs.valid and math.isfinite(x) and math.isfinite(y)) or (x == 0.0 and y == 0.0):
             self.last_seen_t = t_e
@@ -416,6 +445,9 @@ class BallEstimator:
         psi = psi_pred + (psi - psi_pred + math.pi) % (2.0 * math.pi) - math.pi
         phi_meas = self.phi_of_psi(psi)
         nu = phi_meas - phi_p
+        # the stamps' jitter times the rate the innovation moves at (module docstring)
+        dphi_dpsi = float(inv[1]) * float(inv[2])
+        r = r + (self._stamp_sigma * (dphi_dpsi * self._thd[-1] - pd_p)) ** 2
         s = p11 + r
         if not abs(nu) <= cfg.gate_sigma * math.sqrt(s):  # also catches NaN
             return self._reject("innovation", f"innovation {nu:+.3g} rad is more than "
@@ -438,6 +470,31 @@ class BallEstimator:
         self.rejected_in_row = 0
         self.phi, self.phi_dot, self._a = phi, phi_dot, a
         return True
+
+    @property
+    def stamp_jitter(self) -> float:
+        """[s] The camera stamps' jitter ``sigma_t``, estimated from their intervals.
+
+        Module docstring, "Stamp timing"; 0 until :data:`STAMP_MIN_INTERVALS` were seen.
+        """
+        return self._stamp_sigma
+
+    def _note_stamp(self, t_e: float) -> None:
+        """Keep a new fix's stamp interval; re-estimate the jitter every eighth one."""
+        if math.isfinite(self._last_stamp):
+            self._intervals.append(t_e - self._last_stamp)
+            self._stamps_seen += 1
+        self._last_stamp = t_e
+        n = len(self._intervals)
+        if n < STAMP_MIN_INTERVALS or self._stamps_seen % 8:
+            return
+        d = np.fromiter(self._intervals, float, n)
+        period = float(np.median(d))
+        if not period > 0.0:
+            return
+        dev = d - np.maximum(np.rint(d / period), 1.0) * period
+        self._stamp_sigma = float(1.4826 * np.median(np.abs(dev - np.median(dev)))
+                                  / math.sqrt(2.0))
 
     @property
     def covariance(self) -> tuple[float, float, float]:

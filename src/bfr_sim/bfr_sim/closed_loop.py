@@ -75,6 +75,9 @@ class SensorConfig:
         Probability that a frame has no valid ball [-].
     camera_blackouts : tuple of (float, float)
         Time intervals [s] in which every frame is invalid (ball hidden).
+    camera_stamp_jitter : float
+        Standard deviation of the error of a frame's exposure stamp [s] (a software stamp's
+        jitter; 0: the stamp is the exposure time).
     encoder_counts : int
         Encoder counts per revolution (0: exact theta) [-].
     encoder_rate_noise : float
@@ -88,13 +91,15 @@ class SensorConfig:
     camera_noise: float = 1.0e-4
     camera_dropout: float = 0.0
     camera_blackouts: tuple[tuple[float, float], ...] = ()
+    camera_stamp_jitter: float = 0.0
     encoder_counts: int = 0
     encoder_rate_noise: float = 0.0
     actuation_delay: float = 0.0
 
     def __post_init__(self) -> None:
         positive("sensors.camera_rate", self.camera_rate)
-        for name in ("camera_latency", "camera_noise", "encoder_rate_noise", "actuation_delay"):
+        for name in ("camera_latency", "camera_noise", "camera_stamp_jitter",
+                     "encoder_rate_noise", "actuation_delay"):
             nonnegative(f"sensors.{name}", getattr(self, name))
         in_range("sensors.camera_dropout", self.camera_dropout, 0.0, 1.0)
         integer("sensors.encoder_counts", self.encoder_counts, minimum=0)
@@ -315,7 +320,8 @@ class _Camera:
     """The camera: exposures on the plant grid, noise, dropouts, blackouts, latency.
 
     A frame exposed at ``tp`` is delivered at ``tp + camera_latency`` with the exposure's time
-    stamp; every frame is also recorded (``t``, ``x``, ``y``, ``valid``) for the result.
+    stamp (off by ``camera_stamp_jitter``, Gaussian, when there is one); every frame is also
+    recorded (``t`` its true exposure, ``x``, ``y``, ``valid``) for the result.
 
     Parameters
     ----------
@@ -334,6 +340,7 @@ class _Camera:
         self.noise = sensors.camera_noise
         self.dropout = sensors.camera_dropout
         self.blackouts = tuple(sensors.camera_blackouts)
+        self.stamp_jitter = sensors.camera_stamp_jitter
         self.plant = plant
         self.rng = rng
         self.pending: deque[tuple[float, BallObservation]] = deque()
@@ -363,7 +370,10 @@ class _Camera:
             by += self.noise * self.rng.standard_normal()
         else:
             bx = by = 0.0
-        self.pending.append((tp + self.latency, BallObservation(tp, bx, by, valid)))
+        # the stamp: the exposure time, off by the stamp's jitter (drawn only when there is
+        # one, so that a run without it draws the same numbers as before)
+        stamp = tp + self.stamp_jitter * self.rng.standard_normal() if self.stamp_jitter else tp
+        self.pending.append((tp + self.latency, BallObservation(stamp, bx, by, valid)))
         self.t.append(tp)
         self.x.append(bx)
         self.y.append(by)
