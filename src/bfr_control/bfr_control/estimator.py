@@ -481,6 +481,8 @@ class BallEstimator:
 
     def _note_stamp(self, t_e: float) -> None:
         """Keep a new fix's stamp interval; re-estimate the jitter every eighth one."""
+        if t_e <= self._last_stamp:
+            return  # a fix handed in again (its exposure was not yet covered): one interval
         if math.isfinite(self._last_stamp):
             self._intervals.append(t_e - self._last_stamp)
             self._stamps_seen += 1
