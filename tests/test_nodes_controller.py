@@ -398,3 +398,26 @@ def test_controller_node_in_a_namespace_gets_the_hardware_file_or_says_why_not(
     assert "was not applied" not in good.output()
     assert (f"parameter file {bare}: its section 'controller' is for /controller, not this "
             f"node (/rig2/controller), and was not applied") in skipped.output()
+
+
+def test_a_command_line_value_beats_the_hardware_files_node_section(
+        ros_harness: rosutil.RosHarness, node_processes) -> None:  # noqa: ANN001
+    """``--params-file hardware.yaml -p loop.trigger:=observation``: ROS 2 applies the file's
+    ``/**/controller`` section over ``-p`` (which it stores for every node), so the value
+    typed on the command line was silently not used (a probe written apart: the docs' own
+    ``-p markers.rate:=30.0`` and joint-name overrides did nothing; ``-p
+    safety.watchdog_timeout:=-1.0`` started, with the file's 0.2 s). Now the command line
+    wins and a line says so; a value that the checks refuse stops the node (exit 2)."""
+    hw = config_path("bfr_control", "hardware.yaml")
+    typed = node_processes.start("bfr_control", "controller_node", ros_args=[
+        "--params-file", str(hw), "-p", "loop.trigger:=observation"])
+    assert ros_harness.spin_until(lambda: "trigger " in typed.output(), timeout=60.0), \
+        typed.output()[-2000:]
+    assert "trigger observation," in typed.output(), typed.output()[-2000:]
+    assert ("-p loop.trigger:=observation of the command line applied over 'joint_states' of "
+            "a parameter file's section for this node") in typed.output()
+    refused = node_processes.start("bfr_control", "controller_node", ros_args=[
+        "--params-file", str(hw), "-p", "safety.watchdog_timeout:=-1.0"])
+    assert ros_harness.wait_exit(refused, timeout=60.0) == 2, refused.output()[-2000:]
+    assert ("[FATAL] cannot start: parameter safety.watchdog_timeout: must be > 0 s, got -1.0"
+            in refused.output()), refused.output()[-2000:]

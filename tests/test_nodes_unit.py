@@ -20,6 +20,8 @@ from bfr_model.params import load_params
 from bfr_ros.node_common import (
     JointPicker,
     _cast,
+    _command_line_value,
+    command_line_params,
     flatten,
     image_to_array,
     place_process,
@@ -593,3 +595,27 @@ def test_the_camera_says_how_many_of_the_drivers_images_reached_it() -> None:
     assert 99 <= share <= 101, got
     few = CameraNode._describe_received(SimpleNamespace(stamps=deque(stamps[:5])))
     assert few == "images received: too few to judge"
+
+
+def test_command_line_params_are_the_ros_args_assignments() -> None:
+    """``-p`` / ``--param`` of every ``--ros-args`` block, in order, with a node prefix when
+    given (``-p camera:markers.rate:=30.0``); the program's own arguments and other ROS
+    arguments are not taken; values are read as rcl reads them (YAML)."""
+    argv = ["node", "-p", "x:=1", "--ros-args", "-p", "markers.rate:=30.0", "--params-file",
+            "f.yaml", "-r", "__ns:=/rig1", "--param", "camera:input.joint_name:=joint1", "--",
+            "-p", "y:=2", "--ros-args", "-p", "loop.trigger:=observation", "-p", "broken"]
+    assert command_line_params(argv) == [("", "markers.rate", "30.0"),
+                                         ("camera", "input.joint_name", "joint1"),
+                                         ("", "loop.trigger", "observation")]
+    assert _command_line_value("30.0") == 30.0 and _command_line_value("30") == 30
+    assert _command_line_value("true") is True and _command_line_value("[1.0, 2]") == [1.0, 2]
+    assert _command_line_value("joint1") == "joint1" and _command_line_value("") == ""
+    assert _command_line_value("{a: 1}") == "{a: 1}"
+
+
+def test_joint_picker_names_the_nodes_parameter() -> None:
+    """The hint names the parameter as the node has it (a probe read "(parameter
+    joint_name)" where the parameters are loop.joint_name and input.joint_name)."""
+    picker = JointPicker("frame_joint", "loop.joint_name")
+    assert picker.index(["joint1"], (0.0,)) is None
+    assert picker.missing().endswith("(parameter loop.joint_name)")

@@ -230,7 +230,7 @@ class CameraNode(Node):
         inp = p["input"]
         self.use_camera_info = bool(inp["use_camera_info"])
         self.joint_name = str(inp["joint_name"])
-        self.joints = JointPicker(self.joint_name)
+        self.joints = JointPicker(self.joint_name, "input.joint_name")
         self.theta = ThetaBuffer(float(inp["theta_max_gap"]))
         self.frame_timeout = float(inp["frame_timeout"])
         check(self.frame_timeout > 0, "input.frame_timeout",

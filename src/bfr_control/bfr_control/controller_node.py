@@ -216,7 +216,7 @@ class ControllerNode(Node):
         self.trigger = str(loop["trigger"]).lower()
         one_of("loop.trigger", self.trigger, ("observation", "joint_states", "timer"))
         self.joint_name = str(loop["joint_name"])
-        self.joints = JointPicker(self.joint_name)
+        self.joints = JointPicker(self.joint_name, "loop.joint_name")
         self.max_gap_ns = round(float(loop["max_step_gap"]) * _NS)
         self.actuation_delay = float(loop["actuation_delay"])
         nonnegative("loop.actuation_delay", self.actuation_delay)

@@ -20,6 +20,13 @@ says "read at start-up"), and a name given with ``-p`` or a parameter file that 
 does not know stops it at start with one line naming it (and the nearest known names), so a
 misspelt parameter is never silently ignored. An unreadable parameter file or a malformed
 ``--ros-args`` is a one-line FATAL as well (exit status 2), never a traceback.
+
+A ``-p name:=value`` of the command line is the last word: ROS 2 stores it for every node
+(``/**``) and applies a parameter file's section for the node itself (``/**/camera:``, as
+hardware.yaml has) over it, so ``--params-file hardware.yaml -p markers.rate:=30.0`` would
+keep the file's 0.0 without a word. :func:`declare_parameter_tree` puts the command line's
+values back over such a section and says so in one line per parameter
+(:func:`command_line_params`; ``-p node:name:=value`` for one node of a composed process).
 """
 
 from __future__ import annotations
@@ -48,6 +55,7 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.duration import Duration
 from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.type_support import check_is_valid_msg_type
@@ -69,6 +77,7 @@ __all__ = [
     "StopFlag",
     "Throttle",
     "check_process",
+    "command_line_params",
     "declare_parameter_tree",
     "finite",
     "flatten",
@@ -205,6 +214,7 @@ def declare_parameter_tree(node: Any, defaults: Mapping[str, Any],
         neither declared nor accepted (the message names it and the nearest known names).
     """
     flat = flatten(defaults)
+    _command_line_over_files(node, flat)
     for name, value in flat.items():
         if node.has_parameter(name):
             continue
@@ -223,6 +233,78 @@ def declare_parameter_tree(node: Any, defaults: Mapping[str, Any],
         raise ParameterError(
             f"unknown parameter{'s' if len(unknown) > 1 else ''} for node "
             f"{node.get_fully_qualified_name()}: {', '.join(hints)}")
+
+
+#: The ``-p`` assignments of the process's command line, kept by :func:`init_ros`.
+_COMMAND_LINE: list[tuple[str, str, str]] = []
+
+
+def command_line_params(argv: Iterable[str]) -> list[tuple[str, str, str]]:
+    """The ``-p`` / ``--param`` assignments of a command line's ``--ros-args`` blocks.
+
+    Returns
+    -------
+    list of (str, str, str)
+        In order, ``(node, name, text)``: the node prefix of ``-p node:name:=value`` ('' for
+        every node), the parameter's dotted name and its value as typed.
+    """
+    out, inside, it = [], False, iter(argv)
+    for a in it:
+        if a == "--ros-args":
+            inside = True
+        elif a == "--":
+            inside = False
+        elif inside and a in ("-p", "--param"):
+            lhs, sep, text = next(it, "").partition(":=")
+            if sep:
+                node, _, name = lhs.rpartition(":")
+                out.append((node, name, text))
+    return out
+
+
+def _command_line_value(text: str) -> Any:
+    """A ``-p`` value read as rcl reads it: YAML (``1.0``, ``1``, ``true``, ``[a, b]``)."""
+    try:
+        value = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return text
+    return text if value is None or isinstance(value, dict) else value
+
+
+def _command_line_over_files(node: Any, flat: Mapping[str, Any]) -> None:
+    """Put the command line's ``-p`` values over the node's parameter-file sections.
+
+    rclpy keeps the overrides rcl resolved in ``node._parameter_overrides``; where a
+    parameter file's section for this node gave a name that ``-p`` gives too, rcl kept the
+    file's value. The command line's (the last ``-p`` of the name that reaches this node)
+    replaces it before the parameter is declared, and a line says so.
+    """
+    overrides = getattr(node, "_parameter_overrides", None)
+    if overrides is None:
+        return
+    name, fqn = node.get_name(), node.get_fully_qualified_name()
+    given: dict[str, str] = {}
+    for prefix, pname, text in _COMMAND_LINE:
+        if pname in flat and (not prefix or prefix == name or section_applies(prefix, fqn)):
+            given[pname] = text
+    for pname, text in given.items():
+        old = overrides.get(pname)
+        value = _command_line_value(text)
+        if old is None or _same(old.value, value):
+            continue
+        overrides[pname] = Parameter(pname, value=value)
+        node.get_logger().info(
+            f"-p {pname}:={text} of the command line applied over {old.value!r} of a "
+            f"parameter file's section for this node (ROS 2 alone keeps the file's)")
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Whether two parameter values are equal (arrays element by element)."""
+    if isinstance(a, (list, tuple)) or hasattr(a, "tolist"):
+        a = list(a)
+    if isinstance(b, (list, tuple)):
+        b = list(b)
+    return type(a) is type(b) and a == b
 
 
 def _cast(name: str, value: Any, default: Any) -> Any:
@@ -821,6 +903,7 @@ def init_ros(argv: list[str] | None, stop: StopFlag | None = None) -> StopFlag:
     """
     stop = stop if stop is not None else StopFlag()
     stop.install()
+    _COMMAND_LINE[:] = command_line_params(sys.argv if argv is None else argv)
     try:
         rclpy.init(args=argv, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as exc:
@@ -1053,10 +1136,11 @@ class JointPicker:
     its joint can say why (a joint named otherwise than ``name``).
     """
 
-    __slots__ = ("name", "names_seen", "others")
+    __slots__ = ("name", "names_seen", "others", "parameter")
 
-    def __init__(self, name: str) -> None:
+    def __init__(self, name: str, parameter: str = "joint_name") -> None:
         self.name = name
+        self.parameter = parameter           # the node's parameter that names the joint
         self.others = 0                      # messages without the joint
         self.names_seen: tuple[str, ...] = ()  # the names of the last of them
 
@@ -1076,7 +1160,7 @@ class JointPicker:
             return ""
         return (f"{self.others} message(s) arrived without joint {self.name!r} (names "
                 f"{list(self.names_seen)}): is the frame's joint named otherwise? (parameter "
-                f"joint_name)")
+                f"{self.parameter})")
 
 
 def parse_joint_state(data: bytes | memoryview) -> tuple[int, list[str], tuple[float, ...],
