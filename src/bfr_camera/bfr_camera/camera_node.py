@@ -87,6 +87,7 @@ from bfr_camera.calibration import (
     default_camera_path,
 )
 from bfr_camera.detector import BallDetector, DetectionStatus, detector_config_from_dict
+from bfr_camera.stamps import MAX_STAMPS, driver_period
 from bfr_interfaces.msg import BallObservation
 
 __all__ = ["CameraNode", "ThetaBuffer", "main", "node_defaults"]
@@ -239,7 +240,7 @@ class CameraNode(Node):
         check(max_age > 0, "input.max_image_age", f"must be > 0 s, got {max_age}")
         self.max_age_ns = round(max_age * _NS)
         self.ages: deque[int] = deque(maxlen=20000)  # arrival - stamp of recent images [ns]
-        self.stamps: deque[int] = deque(maxlen=20000)  # stamps of recent images [ns]
+        self.stamps: deque[int] = deque(maxlen=MAX_STAMPS)  # stamps of recent images [ns]
         self.old_images = 0  # images older than max_image_age on arrival
         self.old_streak = 0  # of them, in a row up to the newest
         self.obs_pub = self.create_publisher(BallObservation, "ball_observation", STATE_QOS)
@@ -540,26 +541,27 @@ class CameraNode(Node):
     def _describe_received(self) -> str:
         """How many of the driver's images reached the node, from the images' stamps.
 
-        The node sees only what arrives; the driver's period is estimated from the gaps
-        between consecutive received stamps: each gap divided by the whole number of 10th
-        percentile gaps it spans (1 for images back to back, 3 for two missed between), the
-        median of those (so a stamp's jitter neither halves a gap nor counts an image), and
-        the span over it is what was sent.
+        The node sees only what arrives; the driver's period is the one the received
+        stamps' phase repeats with (:func:`bfr_camera.stamps.driver_period`: missed images
+        and the stamps' jitter taken into account), and the span over it is what was sent.
         A best-effort subscription keeping the newest image takes fewer when the node is
         busy, and images too large for shared memory go in UDP fragments a loaded machine
         drops: a low share says so before the fixes' rate does.
         """
-        t = np.sort(np.fromiter(self.stamps, dtype=np.int64))
-        gaps = np.diff(t)
-        gaps = gaps[gaps > 0]
-        if gaps.size < 10:
+        t = np.fromiter(self.stamps, dtype=np.int64)
+        if np.unique(t).size < 10:
             return "images received: too few to judge"
-        spans = np.maximum(np.rint(gaps / np.percentile(gaps, 10)), 1.0)
-        period = float(np.median(gaps / spans))
-        sent = (t[-1] - t[0]) / period + 1.0
+        period = driver_period(t)
+        t = np.unique(t)[-MAX_STAMPS:]
+        span = (t[-1] - t[0]) / 1e9
+        if period is None:
+            return (f"images received {t.size} over the last {span:.1f} s (how many the driver "
+                    f"sent cannot be told: the stamps show no period, their jitter a third of "
+                    f"one or more)")
+        sent = span / period + 1.0
         return (f"images received {t.size} of about {sent:.0f} the driver sent over the last "
-                f"{(t[-1] - t[0]) / 1e9:.1f} s ({100.0 * t.size / sent:.0f} %, its period "
-                f"{period / 1e6:.2f} ms from the stamps)")
+                f"{span:.1f} s ({100.0 * t.size / sent:.0f} %, its period "
+                f"{period * 1e3:.2f} ms from the stamps)")
 
     def on_shutdown(self) -> None:
         """Log the counts."""
