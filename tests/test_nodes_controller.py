@@ -17,7 +17,7 @@ import rosutil
 from bfr_model.dynamics import RigidModel
 from bfr_model.param_file import config_path
 from bfr_model.params import load_params
-from bfr_ros.node_common import COMMAND_QOS, STATE_QOS
+from bfr_ros.node_common import COMMAND_QOS, STATE_QOS, wrong_type_publishers
 from bfr_tools.rig import orbit_start
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -421,3 +421,28 @@ def test_a_command_line_value_beats_the_hardware_files_node_section(
     assert ros_harness.wait_exit(refused, timeout=60.0) == 2, refused.output()[-2000:]
     assert ("[FATAL] cannot start: parameter safety.watchdog_timeout: must be > 0 s, got -1.0"
             in refused.output()), refused.output()[-2000:]
+
+
+def test_a_driver_publishing_joint_states_with_another_type_is_named(
+        ros_harness: rosutil.RosHarness, node_processes) -> None:  # noqa: ANN001
+    """A driver that publishes ``/joint_states`` as ``std_msgs/Float64MultiArray``: the
+    controller's subscription never matches it, and it had said only "no joint_states
+    received yet" (a probe written apart); the graph names the type it found instead."""
+    wrong = ros_harness.node.create_publisher(Float64MultiArray, "joint_states", 10)
+    assert wrong_type_publishers(ros_harness.node, "/joint_states",
+                                 "sensor_msgs/msg/JointState") == (
+        "/joint_states is published as std_msgs/msg/Float64MultiArray by 1 publisher(s), not "
+        "sensor_msgs/msg/JointState: nothing of it can be read")
+    assert wrong_type_publishers(ros_harness.node, "/joint_states",
+                                 "std_msgs/msg/Float64MultiArray") == ""
+    ctrl = node_processes.start("bfr_control", "controller_node")
+    msg = Float64MultiArray(data=[0.0, 0.0])
+    expected = ("no joint_states received yet on /joint_states; /joint_states is published as "
+                "std_msgs/msg/Float64MultiArray by 1 publisher(s), not "
+                "sensor_msgs/msg/JointState")
+
+    def named() -> bool:
+        wrong.publish(msg)
+        return expected in ctrl.output()
+
+    assert ros_harness.spin_until(named, timeout=60.0), ctrl.output()[-2000:]

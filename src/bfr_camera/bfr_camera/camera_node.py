@@ -74,6 +74,7 @@ from bfr_ros.node_common import (
     read_parameter_tree,
     run_node,
     turn_unwrapper,
+    wrong_type_publishers,
 )
 from rclpy.node import Node
 from rclpy.serialization import deserialize_message
@@ -410,7 +411,10 @@ class CameraNode(Node):
             out.phi = out.theta_used = math.nan
             if det.valid:
                 kind = why.split(" s ")[0].rstrip("0123456789.")  # without the figures
-                other = self.joints.missing() if why.startswith("no joint_states") else ""
+                other = ""
+                if why.startswith("no joint_states"):
+                    other = self.joints.missing() or wrong_type_publishers(
+                        self, self.js_sub.topic_name, "sensor_msgs/msg/JointState")
                 text = (f"phi not computed ({why.replace('joint_states', self.js_sub.topic_name)}"
                         + (f"; {other}" if other else "") + "); x, y are still valid")
                 if kind != self.last_theta_problem or self.throttle("theta", 2.0):
@@ -513,8 +517,11 @@ class CameraNode(Node):
             return
         if self.stats["frames"] == 0:  # not armed before the first image
             if gap > 5.0:
+                wrong = wrong_type_publishers(self, self.image_sub.topic_name,
+                                              "sensor_msgs/msg/Image")
                 self.get_logger().warn(f"no camera image received yet on "
-                                       f"{self.image_sub.topic_name}",
+                                       f"{self.image_sub.topic_name}"
+                                       + (f"; {wrong}" if wrong else ""),
                                        throttle_duration_sec=10.0)
             return
         if not self.missing:

@@ -89,6 +89,7 @@ from bfr_ros.node_common import (
     run_node,
     stamp_to_ns,
     turn_unwrapper,
+    wrong_type_publishers,
 )
 from rclpy.clock import Clock, ClockType
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -651,7 +652,8 @@ class ControllerNode(Node):
             if gap > 5.0 and not self.fault:
                 dropped = (f" ({self.backlog_dropped} stale sample(s) dropped as start-up "
                            f"backlog)" if self.backlog_dropped else "")
-                other = self.joints.missing()
+                other = self.joints.missing() or wrong_type_publishers(
+                    self, self.js_sub.topic_name, "sensor_msgs/msg/JointState")
                 self.get_logger().warn(f"no joint_states received yet on "
                                        f"{self.js_sub.topic_name}{dropped}"
                                        + (f"; {other}" if other else ""),

@@ -103,6 +103,7 @@ __all__ = [
     "turn_unwrapper",
     "unapplied_sections",
     "unflatten",
+    "wrong_type_publishers",
 ]
 
 _NS = 1_000_000_000
@@ -1161,6 +1162,22 @@ class JointPicker:
         return (f"{self.others} message(s) arrived without joint {self.name!r} (names "
                 f"{list(self.names_seen)}): is the frame's joint named otherwise? (parameter "
                 f"{self.parameter})")
+
+
+def wrong_type_publishers(node: Any, topic: str, expected: str) -> str:
+    """What publishes ``topic`` with another type than ``expected``; '' if nothing does.
+
+    A driver that publishes the topic with another type (``std_msgs/msg/Float64MultiArray``
+    on ``/joint_states``) never matches the node's subscription, and the node would only
+    see that nothing came; the graph says why. ``expected`` as ROS writes it,
+    ``sensor_msgs/msg/JointState``.
+    """
+    infos = [i for i in node.get_publishers_info_by_topic(topic) if i.topic_type != expected]
+    if not infos:
+        return ""
+    types = ", ".join(sorted({i.topic_type for i in infos}))
+    return (f"{topic} is published as {types} by {len(infos)} publisher(s), not {expected}: "
+            f"nothing of it can be read")
 
 
 def parse_joint_state(data: bytes | memoryview) -> tuple[int, list[str], tuple[float, ...],
