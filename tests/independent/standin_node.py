@@ -95,6 +95,9 @@ class StandInConfig:
         Delay from exposure mid-time to publication [s, simulated].
     camera_noise : float
         Pixel noise [DN].
+    camera_stamp_jitter : float
+        Standard deviation of the error of an image's stamp [s] (a driver that stamps on
+        arrival; 0: the exposure mid-time).
     camera_occlusion : bool
         The front plate hides the inner part of the ball (False: a transparent plate).
     torque_limit : float
@@ -129,6 +132,7 @@ class StandInConfig:
     frame_rate: float = 200.0
     camera_latency: float = 0.004
     camera_noise: float = 2.5
+    camera_stamp_jitter: float = 0.0
     camera_occlusion: bool = True
     torque_limit: float = 0.1
     command_timeout: float = 0.05
@@ -146,6 +150,7 @@ class StandInConfig:
                   ("camera.frame_rate", 1.0 <= self.frame_rate <= 1000.0),
                   ("effects.camera_latency", 0.0 <= self.camera_latency <= 1.0),
                   ("camera.noise", self.camera_noise >= 0.0),
+                  ("camera.stamp_jitter", 0.0 <= self.camera_stamp_jitter <= 0.1),
                   ("actuator.torque_limit", self.torque_limit > 0.0),
                   ("command.timeout", self.command_timeout > 0.0),
                   ("physics.dt", 1e-5 <= self.physics_dt <= 2e-3),
@@ -159,7 +164,8 @@ class StandInConfig:
 
 _FIELD = {"time_scale": "time_scale", "duration": "duration", "joint_states.rate": "joint_rate",
           "camera.frame_rate": "frame_rate", "effects.camera_latency": "camera_latency",
-          "camera.noise": "camera_noise", "actuator.torque_limit": "torque_limit",
+          "camera.noise": "camera_noise", "camera.stamp_jitter": "camera_stamp_jitter",
+          "actuator.torque_limit": "torque_limit",
           "command.timeout": "command_timeout", "physics.dt": "physics_dt",
           "status_period": "status_period", "start.wait": "start_wait",
           "start.joint_states_peers": "start_js_peers"}
@@ -181,7 +187,8 @@ PARAMETERS: dict[str, Any] = {
     "effects.bump_height": 3e-4, "effects.bump_width": 4e-3, "effects.camera_latency": 0.004,
     "joint_states.rate": 1000.0, "encoder.counts_per_rev": 16384,
     "encoder.velocity_window": 2, "encoder.velocity_filter": 0.0,
-    "camera.frame_rate": 200.0, "camera.noise": 2.5, "camera.occlusion": True,
+    "camera.frame_rate": 200.0, "camera.noise": 2.5, "camera.stamp_jitter": 0.0,
+    "camera.occlusion": True,
     "camera.position": list(render.CameraModel().position),
     "camera.look_at": list(render.CameraModel().look_at), "camera.roll": render.CameraModel().roll,
     "actuator.torque_limit": 0.1, "command.timeout": 0.05, "physics.dt": 1e-3,
@@ -280,6 +287,7 @@ def config_from_values(values: dict[str, Any]) -> StandInConfig:
         ball_angle=v["initial.ball_angle"], ball_angle_dot=v["initial.ball_angle_dot"],
         joint_rate=v["joint_states.rate"], frame_rate=v["camera.frame_rate"],
         camera_latency=v["effects.camera_latency"], camera_noise=v["camera.noise"],
+        camera_stamp_jitter=v["camera.stamp_jitter"],
         camera_occlusion=v["camera.occlusion"],
         torque_limit=v["actuator.torque_limit"], command_timeout=v["command.timeout"],
         physics_dt=v["physics.dt"], camera_params_out=v["camera_params_out"],
@@ -468,7 +476,10 @@ class StandIn:
         ball = (x, y) if math.isfinite(x) else None
         img = self.renderer.render(self.plant.theta, ball)
         due = self.t_ns + round(self.cfg.camera_latency * 1e9)
-        self.frames.append((due, self.t_ns, img))
+        stamp = self.t_ns
+        if self.cfg.camera_stamp_jitter:  # a stamp taken on arrival, not at the exposure
+            stamp += round(self.cfg.camera_stamp_jitter * 1e9 * self.rng.standard_normal())
+        self.frames.append((due, stamp, img))
 
     def _publish_due_frames(self) -> None:
         while self.frames and self.frames[0][0] <= self.t_ns:
