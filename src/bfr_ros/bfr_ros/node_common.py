@@ -249,17 +249,12 @@ def command_line_params(argv: Iterable[str]) -> list[tuple[str, str, str]]:
         In order, ``(node, name, text)``: the node prefix of ``-p node:name:=value`` ('' for
         every node), the parameter's dotted name and its value as typed.
     """
-    out, inside, it = [], False, iter(argv)
-    for a in it:
-        if a == "--ros-args":
-            inside = True
-        elif a == "--":
-            inside = False
-        elif inside and a in ("-p", "--param"):
-            lhs, sep, text = next(it, "").partition(":=")
-            if sep:
-                node, _, name = lhs.rpartition(":")
-                out.append((node, name, text))
+    out = []
+    for flag, value in _ros_args(argv):
+        lhs, sep, text = value.partition(":=")
+        if flag != "--params-file" and sep:
+            node, _, name = lhs.rpartition(":")
+            out.append((node, name, text))
     return out
 
 
@@ -812,17 +807,24 @@ class StopFlag:
         sys.unraisablehook = hook
 
 
-def ros_params_files(argv: Iterable[str]) -> list[str]:
-    """The ``--params-file`` arguments of a command line's ``--ros-args`` blocks, in order."""
-    files, inside, it = [], False, iter(argv)
+def _ros_args(argv: Iterable[str]) -> Iterator[tuple[str, str]]:
+    """``(flag, value)`` of the parameter flags of a command line's ``--ros-args`` blocks.
+
+    The flags ``--params-file``, ``-p`` and ``--param``, in order.
+    """
+    inside, it = False, iter(argv)
     for a in it:
         if a == "--ros-args":
             inside = True
         elif a == "--":
             inside = False
-        elif inside and a == "--params-file":
-            files.append(next(it, ""))
-    return [f for f in files if f]
+        elif inside and a in ("--params-file", "-p", "--param"):
+            yield a, next(it, "")
+
+
+def ros_params_files(argv: Iterable[str]) -> list[str]:
+    """The ``--params-file`` arguments of a command line's ``--ros-args`` blocks, in order."""
+    return [v for flag, v in _ros_args(argv) if flag == "--params-file" and v]
 
 
 def section_applies(key: str, fqn: str) -> bool:
