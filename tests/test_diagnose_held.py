@@ -17,7 +17,14 @@ from bfr_diagnose.held import (
     spin_share,
     waist_period,
 )
-from bfr_diagnose.preprocess import HELD_WINDOW, frame_held, held_span, plan_parts
+from bfr_diagnose.preprocess import (
+    HELD_WINDOW,
+    frame_held,
+    held_angle,
+    held_bound,
+    held_span,
+    plan_parts,
+)
 from bfr_diagnose.synth import SynthConfig, held_frame_recording
 from bfr_model.contact import IX, IY, ContactModel
 from bfr_model.io.rig_log import read_rig_log
@@ -139,31 +146,50 @@ def _resensed(rec: Recording, theta: np.ndarray, resolution: float | None) -> Re
     return dataclasses.replace(rec, theta=theta, meta=meta)
 
 
-@pytest.mark.parametrize("sensor", ["flickering encoder", "analogue sensor"])
-def test_a_clamped_frame_read_by_a_restless_sensor_is_held(sensor: str) -> None:
-    """Another rig's clamped frame, as its sensor reports it: an encoder of 1 mrad steps that
-    flickers between five steps around the clamp (a span of 4 mrad, past the bound of three
-    steps), or an analogue sensor with 1 mrad of white noise (a span of about 8 mrad). Both
-    are held: their 0.1 s averages span well under 2 mrad, and the part is analysed as
-    "frame held" (it was "rolling": the frame's row fitted with zero torque). The same
-    frame creeping 20 mrad over the run, or swinging +-3 mrad at 2 Hz, is not held."""
+@pytest.mark.parametrize(("sensor", "every"), [
+    ("flickering encoder", 1), ("analogue sensor", 1), ("noisy analogue sensor", 6),
+    ("very noisy analogue sensor", 1), ("two-count encoder", 1)])
+def test_a_clamped_frame_read_by_a_restless_sensor_is_held(sensor: str, every: int) -> None:
+    """Another rig's clamped frame (at -0.0139 rad, as rolling_data's), as its sensor reports
+    it: an encoder of 1 mrad steps flickering between five steps around the clamp (a span
+    of 4 mrad, past the bound of three steps); an analogue sensor with 1 mrad of white
+    noise (a span of about 8 mrad); 2 mrad of it on a log of every 6th line (153 a second:
+    its 0.1 s averages span about 3 mrad); 5 mrad at the full rate (3.7 mrad); a 256-count
+    encoder flickering 50/50 between its two counts around the clamp (-0.0245 and 0). All
+    are held (the averages within ten times their noise, :func:`held_bound`) and go through
+    plan_parts as "frame held" (the last three were "rolling" for a probe written apart:
+    the frame row fitted with zero torque, a torque gain at its bound); the held angle is
+    the trimmed mean, within a tenth of a step of the clamp (the median had put the
+    two-count frame on one of its counts). The same frame creeping 20 mrad over the run, or
+    swinging +-3 mrad at 2 Hz, is not held."""
+    clamp = -0.0139
     rec = held_frame_recording(NOMINAL, SynthConfig(duration=6.0, camera_rate=165.0),
-                               np.random.default_rng(4), theta=0.05)
+                               np.random.default_rng(4), theta=clamp)
     rng = np.random.default_rng(5)
     n = rec.t.size
+    res: float | None = None
     if sensor == "flickering encoder":
         res = 1e-3
         theta = res * (np.rint(rec.theta / res) + rng.integers(-2, 3, n))
+    elif sensor == "two-count encoder":
+        res = 2 * np.pi / 256
+        theta = np.where(rng.random(n) < 0.5, -res, 0.0)
     else:
-        res = None
-        theta = rec.theta + 1e-3 * rng.standard_normal(n)
+        sd = {"analogue sensor": 1e-3, "noisy analogue sensor": 2e-3,
+              "very noisy analogue sensor": 5e-3}[sensor]
+        theta = rec.theta + sd * rng.standard_normal(n)
     held = _resensed(rec, theta, res)
+    if every > 1:
+        held = held._take(np.arange(0, n, every), f"every {every}th line")  # another logger
     step = res if res is not None else 0.0
-    assert np.ptp(held.theta) > max(3 * step, 2e-3)   # the raw span alone: not held
-    assert held_span(held) < 1e-3 and frame_held(held, step)
     kind, _, prep = plan_parts([held])[0][0]
-    assert kind == "frame held" and prep.frame_held
+    assert kind == "frame held" and prep.frame_held, prep.info["theta_source"]
+    assert held_span(held) <= held_bound(held, step) and frame_held(held, step)
     assert f"its {HELD_WINDOW:g} s averages" in prep.info["theta_source"]
+    assert held_angle(held) == pytest.approx(-0.0123 if res and res > 0.01 else clamp,
+                                             abs=max(0.1 * step, 1e-3))
+    if sensor == "two-count encoder":
+        return
     creeping = _resensed(rec, theta + 0.02 * (rec.t - rec.t[0]) / np.ptp(rec.t), res)
     assert not frame_held(creeping, step)
     swinging = _resensed(rec, theta + 3e-3 * np.sin(2 * np.pi * 2.0 * rec.t), res)

@@ -50,6 +50,7 @@ Every operation is zero-phase.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -65,12 +66,14 @@ from bfr_model.recording import Recording
 from numpy.typing import NDArray
 from scipy.interpolate import CubicSpline
 from scipy.signal import savgol_filter
+from scipy.stats import trim_mean
 
 from bfr_diagnose import DiagnoseError
 
 __all__ = ["HELD_WINDOW", "Piece", "PrepConfig", "Prepared", "SensorCorrection", "fix_noise",
-           "fix_noise_path", "frame_held", "held_span", "path_steps", "plan_parts", "prepare",
-           "prepare_pieces", "prepare_runs", "segments_from_mask", "split_pieces", "stitch"]
+           "fix_noise_path", "frame_held", "held_angle", "held_bound", "held_span",
+           "path_steps", "plan_parts", "prepare", "prepare_pieces", "prepare_runs",
+           "segments_from_mask", "split_pieces", "stitch"]
 
 FloatArray = NDArray[np.float64]
 
@@ -624,15 +627,46 @@ def held_span(rec: Recording) -> float:
     return float(np.ptp((c[hi] - c[lo]) / (hi - lo)))
 
 
-def frame_held(rec: Recording, resolution: float) -> bool:
-    """Whether the frame did not turn: its angle spans at most 3 encoder steps (or 2 mrad).
+def held_bound(rec: Recording, resolution: float) -> float:
+    """[rad] The largest :func:`held_span` of a held frame: its sensor's noise, averaged.
 
-    The raw angle's span, or the span of its :data:`HELD_WINDOW` averages
-    (:func:`held_span`): a clamped frame whose encoder flickers between a few steps, or a
-    sensor whose noise spans more than the bound, is held too.
+    Three encoder steps or 2 mrad, or ten times the noise of a window's average,
+    ``10 sigma / sqrt(n)``: ``sigma`` the raw angle's noise (``1.4826 MAD`` of its
+    successive differences over ``sqrt 2``, which a steady turn does not move), ``n`` the
+    median samples per window. The averages of white noise over a run span about ``2
+    sqrt(2 ln M) sigma / sqrt(n)`` (``M`` windows: 6-7 for a minute), so ten keeps a noisy
+    sensor's clamped frame held at any line rate (a probe written apart: 2 mrad of noise at
+    153 lines a second averaged to a 3 mrad span and was taken as rolling; 5 mrad at 920
+    lines, 3.7 mrad); a frame that turns spans radians.
     """
-    bound = max(3.0 * resolution, 2e-3)
-    return bool(np.ptp(rec.theta) <= bound or held_span(rec) <= bound)
+    d = np.diff(rec.theta)
+    if not d.size:
+        return max(3.0 * resolution, 2e-3)
+    sigma = robust_sd(d) / math.sqrt(2.0)
+    per_window = max(float(HELD_WINDOW / np.median(np.diff(rec.t))), 1.0)
+    return max(3.0 * resolution, 2e-3, 10.0 * sigma / math.sqrt(per_window))
+
+
+def held_angle(rec: Recording) -> float:
+    """[rad] Where a held frame is: its angle's mean, the outer 5 % on either side left out.
+
+    Not the median: an encoder flickering between two counts has its median on one of them
+    (a probe's two-count flicker of a 256-count encoder read 0.0000 rad for a frame at
+    -0.0139 rad, between its counts -0.0245 and 0), and the null's noisy copies jumped
+    between them, a whole count of frame angle that the ball's rows then had to explain.
+    """
+    return float(trim_mean(rec.theta, 0.05))
+
+
+def frame_held(rec: Recording, resolution: float) -> bool:
+    """Whether the frame did not turn: its angle spans no more than its sensor's noise.
+
+    The raw angle's span or the span of its :data:`HELD_WINDOW` averages
+    (:func:`held_span`) within :func:`held_bound`: a clamped frame whose encoder flickers
+    between a few steps, or whose sensor is noisy, is held too.
+    """
+    bound = held_bound(rec, resolution)
+    return bool(np.ptp(rec.theta) <= max(3.0 * resolution, 2e-3) or held_span(rec) <= bound)
 
 
 def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0,
@@ -678,7 +712,7 @@ def prepare(rec: Recording, cfg: PrepConfig | None = None, latency0: float = 0.0
     held = ball.has_ball and (frame_held(rec, res) if held is None else held)
     if held:
         # the frame does not turn: its angle is constant, its rates zero
-        th0 = float(np.median(rec.theta))
+        th0 = held_angle(rec)
         frame = _FrameAngle(theta=np.full(tg.size, th0), theta_dot=np.zeros(tg.size),
                             theta_ddot=np.zeros(tg.size), noise=float(res) / np.sqrt(12.0),
                             source=f"frame held at theta = {th0:.4f} rad (it spans "
@@ -752,7 +786,7 @@ def _frame_angle(rec: Recording, tg: FloatArray, cfg: PrepConfig, res: float) ->
         if cfg.dtheta_delay is None:
             vl = velocity_lag(rec.t, rec.theta, rec.theta_dot)
             lag = {**vl.to_json(), "how": "measured on this recording" if vl.identified else
-                   "not identified on this recording, the velocity hardly varying: none"}
+                   vl.note}
             delay, c2 = vl.lag, vl.c2
         else:
             delay, c2 = float(cfg.dtheta_delay), float(cfg.dtheta_c2)
@@ -821,7 +855,11 @@ def _ball(rec: Recording, tg: FloatArray, cfg: PrepConfig, latency0: float) -> _
     if cfg.ball == "yes" and not has_ball:
         raise DiagnoseError("--ball yes given but the recording holds no valid ball fixes")
     if not has_ball:
-        if int(nfix.sum()) > 0:
+        if cfg.ball == "no":
+            note = (f"ball rows switched off (--ball no; the recording holds "
+                    f"{int(nfix.sum())} valid camera fix(es)): frame-only analysis (row 1, "
+                    f"ball terms off)")
+        elif int(nfix.sum()) > 0:
             note = (f"no usable ball data: only {int(nfix.sum())} valid camera fix(es) in "
                     f"{rec.duration:.1f} s; frame-only analysis (row 1, ball terms off)")
         else:
