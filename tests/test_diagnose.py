@@ -27,6 +27,7 @@ from bfr_diagnose.api import (
     diagnose_recordings,
     held_out_block,
 )
+from bfr_diagnose.cli import main as diagnose_cli
 from bfr_diagnose.effects import EFFECT_NAMES, EFFECTS, plausibility
 from bfr_diagnose.identify import RESOLVED_Z, Fit, _corr_matrix, _covariance, _degenerate
 from bfr_diagnose.preprocess import Prepared
@@ -379,6 +380,47 @@ def test_cli_bad_input(tmp_path: Path, content: str, what: str) -> None:
     assert r.returncode == 2, r.stderr
     assert "error" in r.stderr and "Traceback" not in r.stderr
     assert not out.exists()
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ntnu-rig is absent")
+@pytest.mark.parametrize(("args", "said"), [
+    (["--null-runs", "0"], "--null-runs 0: expected at least 1 (--no-null skips the null)"),
+    (["--max-effects", "-1"], "--max-effects -1: expected a number >= 0"),
+    (["--velocity-lag", "-0.01"], "--velocity-lag -0.01: expected a lag >= 0 s"),
+    (["--t-from", "10", "--t-to", "5"], "--t-from 10 is not before --t-to 5"),
+    (["--topic", "joint_states=/x"], "--topic applies to bags only"),
+    (["--t-from", "100"], "rolling_data.txt: time window [100.0, None] s holds no sample (its "
+                          "2 run(s) span [0, 27.8281] s)"),
+    (["@twice"], "hold the same recording (the same bytes): give it once"),
+])
+def test_cli_refuses_what_cannot_mean_anything(tmp_path: Path, capsys: pytest.CaptureFixture,
+                                               args: list[str], said: str) -> None:
+    """A probe written apart: ``--null-runs 0`` ended in numpy's "need at least one array to
+    concatenate"; ``--max-effects -1``, a negative velocity lag and ``--topic`` on rig logs
+    ran without a word; an inverted window and one past a multi-run log's end were said to
+    find a recording spanning "[0.0, 0.0] s" (its first run, one sample); the same log given
+    twice counted twice (narrower intervals). Each is one line, exit 2, nothing written."""
+    log = DATA / "rolling_data.txt"
+    if args == ["@twice"]:
+        copy = tmp_path / "copy.txt"
+        copy.write_bytes(log.read_bytes())
+        args = [str(copy)]
+    out = tmp_path / "out"
+    assert diagnose_cli([str(log), *args, "--no-null", "--quiet", "--out-dir", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert said in err and "Traceback" not in err, err
+    assert not out.exists()
+
+
+@pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/ntnu-rig is absent")
+def test_cli_window_spans_every_run_of_a_log(capsys: pytest.CaptureFixture) -> None:
+    """``--t-from 5 --t-to 15`` on rolling_data.txt (a lone first sample at 0, then the run):
+    the window is taken from every run (it was refused, naming the first run's span)."""
+    assert diagnose_cli([str(DATA / "rolling_data.txt"), "--t-from", "5", "--t-to", "15",
+                         "--no-null", "--no-plots", "--effects", "rolling_resistance",
+                         "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert 9.5 < out["recordings"][0]["duration"] <= 10.01, out["recordings"][0]["duration"]
 
 
 def test_cli_nan_csv(tmp_path: Path) -> None:

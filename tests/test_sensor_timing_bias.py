@@ -54,6 +54,19 @@ def test_an_unfiltered_velocity_has_no_second_order_term(line: float) -> None:
     assert abs(r.c2) < 1e-8, r.c2
 
 
+def test_a_velocity_on_time_behind_a_coarse_encoder_is_said_so() -> None:
+    """A velocity 0.1 ms ahead of a 10 mrad encoder's angle (920 lines a second): the lag
+    is measured to a few microseconds but explains little of the angle's error (its steps),
+    so none is applied, and the note says so (a probe written apart read "the velocity
+    hardly varies" on fin.txt with its velocity moved on time, whose velocity varies)."""
+    t = np.arange(0.0, 15.0, 1.0 / 920.0)
+    theta, _ = _sines(t, 0.0)
+    _, v = _sines(t + 1e-4, 0.0)
+    r = velocity_lag(t, 1e-2 * np.rint(theta / 1e-2), v)
+    assert not r.identified and r.lag == 0.0
+    assert "hardly varies" not in r.note and "explains little" in r.note, r.note
+
+
 def test_a_first_order_lag_gives_its_time_constant_and_second_order_term() -> None:
     """A 7 ms first-order lag: the delay is tau to 0.2 %, ``c2`` is ``-tau^2/2`` to 1 %."""
     tau = 7e-3

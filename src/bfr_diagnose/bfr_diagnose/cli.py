@@ -22,12 +22,14 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import hashlib
 import math
 import sys
 import time
 import warnings
 from pathlib import Path
 
+import numpy as np
 from bfr_model.io import account_line, read_runs
 from bfr_model.io.output import OutputError, check_new
 from bfr_model.params import ParameterError, load_params
@@ -110,6 +112,50 @@ def _read(path: Path, topics: list[str], run: str | None,
     return read_runs(path, run, allow_partial=allow_partial, topic_map=remap or None)
 
 
+def _check_arguments(args: argparse.Namespace) -> None:
+    """Refuse option values that cannot mean anything, before anything is read."""
+    if args.null_runs < 1:
+        raise DiagnoseError(f"--null-runs {args.null_runs}: expected at least 1 (--no-null "
+                            f"skips the null)")
+    if args.max_effects < 0:
+        raise DiagnoseError(f"--max-effects {args.max_effects}: expected a number >= 0")
+    if args.velocity_lag is not None and not (math.isfinite(args.velocity_lag)
+                                              and args.velocity_lag >= 0.0):
+        raise DiagnoseError(f"--velocity-lag {args.velocity_lag!r}: expected a lag >= 0 s "
+                            f"(a filtered velocity follows its angle)")
+    for name in ("t_from", "t_to", "camera_latency"):
+        v = getattr(args, name)
+        if v is not None and not math.isfinite(v):
+            raise DiagnoseError(f"--{name.replace('_', '-')} {v!r}: expected a number")
+    if args.t_from is not None and args.t_to is not None and args.t_from >= args.t_to:
+        raise DiagnoseError(f"--t-from {args.t_from:g} is not before --t-to {args.t_to:g}")
+    if args.topic and all(Path(r).suffix.lower() == ".txt" for r in args.recordings):
+        raise DiagnoseError("--topic applies to bags only; the recordings are rig logs")
+    seen: dict[tuple[int, str], Path] = {}
+    for given in args.recordings:
+        path = Path(given)
+        if path.is_file():
+            key = (path.stat().st_size, hashlib.sha256(path.read_bytes()).hexdigest())
+            if key in seen:
+                raise DiagnoseError(f"{path} and {seen[key]} hold the same recording (the "
+                                    f"same bytes): give it once, or it counts twice")
+            seen[key] = path
+
+
+def _window(path: Path, runs: list[Recording], t_from: float | None,
+            t_to: float | None) -> list[Recording]:
+    """The runs' samples within ``[t_from, t_to]`` (runs without any left out)."""
+    kept = [r.slice_time(t_from, t_to) for r in runs
+            if np.any((r.t >= (-np.inf if t_from is None else t_from))
+                      & (r.t <= (np.inf if t_to is None else t_to)))]
+    if not kept:
+        lo = min(float(r.t[0]) for r in runs)
+        hi = max(float(r.t[-1]) for r in runs)
+        raise DiagnoseError(f"{path}: time window [{t_from}, {t_to}] s holds no sample (its "
+                            f"{len(runs)} run(s) span [{lo:g}, {hi:g}] s)")
+    return kept
+
+
 def _options(args: argparse.Namespace, first: Recording) -> DiagnoseOptions:
     """The diagnosis options of the command line."""
     only = None
@@ -141,6 +187,7 @@ def main(argv: list[str] | None = None) -> int:
                   flush=True)
 
     try:
+        _check_arguments(args)
         if args.out_dir is not None:
             check_new(args.out_dir, args.force)
         recordings = []
@@ -153,7 +200,7 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"bfr diagnose: {account_line(runs)}", file=sys.stderr, flush=True)
                 accounts += [r.meta["read_account"] for r in runs if "read_account" in r.meta]
                 if args.t_from is not None or args.t_to is not None:
-                    runs = [r.slice_time(args.t_from, args.t_to) for r in runs]
+                    runs = _window(path, runs, args.t_from, args.t_to)
                 recordings.append((str(path), runs))
                 say(f"read {path}: {len(runs)} run(s), {sum(r.n for r in runs)} samples, "
                     f"{sum(r.duration for r in runs):.1f} s")

@@ -254,6 +254,8 @@ def ljung_box(r: FloatArray, lag_step: int, lags: int = 10) -> dict[str, float]:
         return {"Q": float("nan"), "p_value": float("nan"), "rho1": float("nan")}
     x = x - x.mean()
     v = float(np.dot(x, x))
+    if not v > 0.0:  # a constant residual (a held frame's zero-torque row): no whiteness
+        return {"Q": float("nan"), "p_value": float("nan"), "rho1": float("nan")}
     rho = np.array([float(np.dot(x[:-k], x[k:]) / v) for k in range(1, lags + 1)])
     q = float(n * (n + 2) * np.sum(rho ** 2 / (n - np.arange(1, lags + 1))))
     return {"Q": q, "p_value": float(chi2.sf(q, lags)), "rho1": float(rho[0])}

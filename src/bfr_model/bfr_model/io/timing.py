@@ -231,9 +231,13 @@ def velocity_lag(t: FloatArray, theta: FloatArray, theta_dot: FloatArray, *,
                     f", second-order term {c2 * 1e6:+.2f} ms^2 (as a moving average of "
                     f"{math.sqrt(24 * c2) * 1e3:.1f} ms)" if c2 > 0 else "")
                 + "; corrected by that")
-    else:
+    elif std >= 1e-3:
         note = (f"velocity lag not identified ({d * 1e3:.2f} +- {std * 1e3:.2f} ms; the "
                 "velocity hardly varies): none applied")
+    else:  # well measured, but the shift explains nothing (the velocity already on time)
+        note = (f"velocity lag {d * 1e3:.2f} +- {std * 1e3:.2f} ms explains little of the "
+                f"angle's error (RMS x{rms1 / rms0:.2f} shifted, under the encoder's steps): "
+                f"none applied")
     return VelocityLag(lag=d if identified else 0.0, std=std if identified else math.inf,
                        identified=identified, rms_unshifted=rms0, rms_shifted=rms1, note=note,
                        c2=c2, c2_std=c2_std)
