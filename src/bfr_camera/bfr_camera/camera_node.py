@@ -411,14 +411,14 @@ class CameraNode(Node):
             out.phi = out.theta_used = math.nan
             if det.valid:
                 kind = why.split(" s ")[0].rstrip("0123456789.")  # without the figures
-                other = ""
-                if why.startswith("no joint_states"):
-                    other = self.joints.missing() or wrong_type_publishers(
-                        self, self.js_sub.topic_name, "sensor_msgs/msg/JointState")
-                text = (f"phi not computed ({why.replace('joint_states', self.js_sub.topic_name)}"
-                        + (f"; {other}" if other else "") + "); x, y are still valid")
                 if kind != self.last_theta_problem or self.throttle("theta", 2.0):
-                    self.get_logger().warn(text)
+                    other = ""  # the graph asked only for a warning that is given
+                    if why.startswith("no joint_states"):
+                        other = self.joints.missing() or wrong_type_publishers(
+                            self, self.js_sub.topic_name, "sensor_msgs/msg/JointState")
+                    self.get_logger().warn(
+                        f"phi not computed ({why.replace('joint_states', self.js_sub.topic_name)}"
+                        + (f"; {other}" if other else "") + "); x, y are still valid")
                 self.last_theta_problem = kind
         else:
             self.last_theta_problem = ""
@@ -555,11 +555,10 @@ class CameraNode(Node):
         busy, and images too large for shared memory go in UDP fragments a loaded machine
         drops: a low share says so before the fixes' rate does.
         """
-        t = np.fromiter(self.stamps, dtype=np.int64)
-        if np.unique(t).size < 10:
+        t = np.unique(np.fromiter(self.stamps, dtype=np.int64))[-MAX_STAMPS:]
+        if t.size < 10:
             return "images received: too few to judge"
         period = driver_period(t)
-        t = np.unique(t)[-MAX_STAMPS:]
         span = (t[-1] - t[0]) / 1e9
         if period is None:
             return (f"images received {t.size} over the last {span:.1f} s (how many the driver "

@@ -80,6 +80,7 @@ from dataclasses import dataclass
 import numpy as np
 from bfr_model.dynamics import RigidModel, rigid_terms
 from bfr_model.geometry import offset_kernel
+from bfr_model.io.timing import robust_sd
 from bfr_model.jit import njit
 from bfr_model.param_file import integer, positive
 
@@ -495,8 +496,7 @@ class BallEstimator:
         if not period > 0.0:
             return
         dev = d - np.maximum(np.rint(d / period), 1.0) * period
-        self._stamp_sigma = float(1.4826 * np.median(np.abs(dev - np.median(dev)))
-                                  / math.sqrt(2.0))
+        self._stamp_sigma = robust_sd(dev) / math.sqrt(2.0)
 
     @property
     def covariance(self) -> tuple[float, float, float]:

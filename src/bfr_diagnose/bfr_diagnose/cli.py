@@ -131,15 +131,17 @@ def _check_arguments(args: argparse.Namespace) -> None:
         raise DiagnoseError(f"--t-from {args.t_from:g} is not before --t-to {args.t_to:g}")
     if args.topic and all(Path(r).suffix.lower() == ".txt" for r in args.recordings):
         raise DiagnoseError("--topic applies to bags only; the recordings are rig logs")
-    seen: dict[tuple[int, str], Path] = {}
-    for given in args.recordings:
-        path = Path(given)
-        if path.is_file():
-            key = (path.stat().st_size, hashlib.sha256(path.read_bytes()).hexdigest())
-            if key in seen:
-                raise DiagnoseError(f"{path} and {seen[key]} hold the same recording (the "
-                                    f"same bytes): give it once, or it counts twice")
-            seen[key] = path
+    files = [Path(r) for r in args.recordings if Path(r).is_file()]
+    sizes = [f.stat().st_size for f in files]
+    seen: dict[str, Path] = {}
+    for path, size in zip(files, sizes, strict=True):
+        if sizes.count(size) < 2:
+            continue  # only files of one size can hold the same bytes (a bag is not read)
+        key = hashlib.sha256(path.read_bytes()).hexdigest()
+        if key in seen:
+            raise DiagnoseError(f"{path} and {seen[key]} hold the same recording (the same "
+                                f"bytes): give it once, or it counts twice")
+        seen[key] = path
 
 
 def _window(path: Path, runs: list[Recording], t_from: float | None,
